@@ -1,0 +1,11 @@
+"""Command-line interface: parses arguments and calls the library; no numerics here."""
+from __future__ import annotations
+
+from agvdyn.cli._app import app
+
+# Each command module registers itself on ``app`` when imported.
+from agvdyn.cli import model_commands  # noqa: E402,F401
+
+
+def main() -> None:
+    app()

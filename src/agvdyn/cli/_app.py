@@ -1,0 +1,18 @@
+"""The typer application every command module registers on."""
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="agvdyn",
+    help="Model, simulate and identify motion-mode-changing wheeled platforms (Pucher, Gattringer, Mueller).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def fail(message: str, code: int = 2) -> "typer.Exit":
+    """Print an error for the user and return the Exit to raise."""
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    return typer.Exit(code)
