@@ -1,0 +1,413 @@
+"""Our log schema (PLATFORM.md "Files"): reading, checking and writing Parquet/CSV logs.
+
+A log has one row per sample, SI units, the columns of :data:`LOG_COLUMNS` and an optional
+``segment`` column. Next to ``run.parquet`` an optional YAML sidecar ``run.parquet.yaml``
+holds facts about the run (platform, true parameters of a simulation, conversion notes).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from agvdyn._files import write_atomically, write_text_atomically
+
+#: Required columns of a log, in the order of PLATFORM.md.
+LOG_COLUMNS = (
+    "t",
+    "alpha_l", "alpha_r",
+    "beta_fl", "beta_rl", "beta_fr", "beta_rr",
+    "m_fl", "m_rl", "m_fr", "m_rr",
+)
+ALPHA_COLUMNS = ("alpha_l", "alpha_r")
+BETA_COLUMNS = ("beta_fl", "beta_rl", "beta_fr", "beta_rr")
+TORQUE_COLUMNS = ("m_fl", "m_rl", "m_fr", "m_rr")
+#: Name of the optional column naming the experiment phase of each row.
+SEGMENT_COLUMN = "segment"
+#: Known segment names: the identification sequence of sec. 6.2, the validation manoeuvres of
+#: sec. 7, and ``align`` for wheel alignment at rest between segments (mode 1).
+SEGMENTS = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align")
+#: Mechanical range of the steering angles (PLATFORM.md), rad.
+STEERING_LIMIT = math.pi / 2
+#: Tolerance on the steering range check, rad (rounding of recorded angles).
+STEERING_TOLERANCE = 1e-6
+#: Default longest allowed gap between samples, in nominal sample periods (median dt).
+MAX_GAP_SAMPLES = 5.0
+#: Suffixes of our own log files.
+LOG_SUFFIXES = (".parquet", ".csv")
+
+
+class LogError(ValueError):
+    """A log that cannot be used; the message names file, column and first offending row."""
+
+
+@dataclass(frozen=True)
+class SegmentRun:
+    """A contiguous run of rows of one segment: rows ``start:stop`` (half open), times t_start..t_end."""
+
+    name: str
+    start: int
+    stop: int
+    t_start: float
+    t_end: float
+
+    @property
+    def slice(self) -> slice:
+        return slice(self.start, self.stop)
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """Path of the YAML sidecar of a log: ``run.parquet`` -> ``run.parquet.yaml``."""
+    path = Path(path)
+    return path.with_name(path.name + ".yaml")
+
+
+def _row_text(source: str, row: int, csv: bool) -> str:
+    return f"row {row} (line {row + 2} of the file)" if csv else f"row {row}"
+
+
+def check_frame(
+    frame: pd.DataFrame,
+    source: str | os.PathLike = "<frame>",
+    *,
+    max_gap_samples: float = MAX_GAP_SAMPLES,
+    csv_rows: bool = False,
+) -> pd.DataFrame:
+    """Check a table against the log schema and return a normalised copy.
+
+    The copy has the columns of :data:`LOG_COLUMNS` first (float64), then the ``segment``
+    column when present (categorical over :data:`SEGMENTS`, missing = row in no segment), then
+    any extra columns unchanged. The input frame is not modified.
+
+    Raises
+    ------
+    LogError
+        Missing columns, non-numeric values, NaN or infinite values, ``t`` not strictly
+        increasing (duplicated or decreasing), gaps longer than ``max_gap_samples`` nominal
+        sample periods (median dt), steering angles beyond ``[-pi/2, pi/2]`` (tolerance
+        :data:`STEERING_TOLERANCE`), unknown segment names. The message names the source,
+        the column and the first offending row.
+    """
+    source = str(source)
+    if not isinstance(frame, pd.DataFrame):
+        raise LogError(f"{source}: expected a pandas DataFrame, got {type(frame).__name__}")
+    if not (isinstance(max_gap_samples, (int, float)) and max_gap_samples >= 1):
+        raise ValueError(f"max_gap_samples={max_gap_samples!r}: expected a number >= 1")
+    missing = [c for c in LOG_COLUMNS if c not in frame.columns]
+    if missing:
+        raise LogError(
+            f"{source}: missing columns {missing}; a log needs {list(LOG_COLUMNS)} "
+            f"(optional '{SEGMENT_COLUMN}'), found {[str(c) for c in frame.columns]}"
+        )
+    n = len(frame)
+    if n < 2:
+        raise LogError(f"{source}: {n} rows: a log needs at least 2 samples")
+    data: dict[str, np.ndarray] = {}
+    for col in LOG_COLUMNS:
+        data[col] = _numeric_column(frame[col], source, col, csv_rows)
+    t = data["t"]
+    for col in LOG_COLUMNS:
+        bad = ~np.isfinite(data[col])
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise LogError(
+                f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {data[col][row]!r} "
+                "is not finite: expected a finite number (NaN, infinite or empty values are not allowed)"
+            )
+    dt = np.diff(t)
+    bad = dt <= 0
+    if bad.any():
+        i = int(np.argmax(bad))
+        kind = "duplicated" if dt[i] == 0 else "decreasing"
+        raise LogError(
+            f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: {kind} time "
+            f"t = {t[i + 1]!r} after t = {t[i]!r}: expected strictly increasing time"
+        )
+    nominal = float(np.median(dt))
+    bad = dt > max_gap_samples * nominal
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise LogError(
+            f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: gap of {dt[i]:.6g} s "
+            f"({dt[i] / nominal:.1f} sample periods) from t = {t[i]!r} to t = {t[i + 1]!r}: expected "
+            f"at most {max_gap_samples:g} nominal sample periods of {nominal:.6g} s"
+        )
+    for col in ALPHA_COLUMNS:
+        bad = np.abs(data[col]) > STEERING_LIMIT + STEERING_TOLERANCE
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise LogError(
+                f"{source}: column '{col}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): steering angle "
+                f"{data[col][row]!r} rad is beyond the mechanical range [-pi/2, pi/2] (expected radians)"
+            )
+    out = pd.DataFrame(data, index=pd.RangeIndex(n))
+    if SEGMENT_COLUMN in frame.columns:
+        out[SEGMENT_COLUMN] = _segment_column(frame[SEGMENT_COLUMN], source, t, csv_rows)
+    for col in frame.columns:
+        if col not in out.columns:
+            out[col] = frame[col].to_numpy()
+    return out
+
+
+def _numeric_column(series: pd.Series, source: str, col: str, csv_rows: bool) -> np.ndarray:
+    """The column as float64; non-numeric entries are an error naming the first one."""
+    if pd.api.types.is_bool_dtype(series.dtype):
+        raise LogError(f"{source}: column '{col}' holds booleans: expected numbers")
+    if pd.api.types.is_numeric_dtype(series.dtype):
+        return series.to_numpy(dtype=np.float64, na_value=np.nan)
+    coerced = pd.to_numeric(series, errors="coerce")
+    bad = (coerced.isna() & series.notna()).to_numpy()
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise LogError(
+            f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {series.iloc[row]!r} "
+            "is not a number: expected a number in SI units"
+        )
+    return coerced.to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: bool) -> pd.Categorical:
+    text = series.astype("string").str.strip()
+    # An empty field means "no segment" (for example a transition between phases).
+    text = text.mask(text == "", pd.NA)
+    unknown = (text.notna() & ~text.isin(SEGMENTS)).to_numpy(dtype=bool)
+    if unknown.any():
+        row = int(np.argmax(unknown))
+        raise LogError(
+            f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): "
+            f"unknown segment name {text.iloc[row]!r}: expected one of {list(SEGMENTS)} or empty"
+        )
+    return pd.Categorical(text.to_numpy(dtype=object, na_value=None), categories=list(SEGMENTS))
+
+
+@dataclass(frozen=True, eq=False)
+class Log:
+    """A checked log in our schema.
+
+    Attributes
+    ----------
+    path : Path or None
+        File the log was read from (the original input for converted logs), None if built in memory.
+    frame : pandas.DataFrame
+        The columns of :data:`LOG_COLUMNS` (float64), ``segment`` (categorical over
+        :data:`SEGMENTS`, missing = no segment) when present, then extra columns. Treat as read only.
+    sidecar : dict
+        Contents of the YAML sidecar, empty when there is none.
+    """
+
+    path: Path | None
+    frame: pd.DataFrame
+    sidecar: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_frame(
+        cls,
+        frame: pd.DataFrame,
+        *,
+        path: str | os.PathLike | None = None,
+        sidecar: dict[str, Any] | None = None,
+        max_gap_samples: float = MAX_GAP_SAMPLES,
+    ) -> "Log":
+        """Check ``frame`` (see :func:`check_frame`) and wrap it in a Log."""
+        checked = check_frame(frame, "<frame>" if path is None else path, max_gap_samples=max_gap_samples)
+        return cls(None if path is None else Path(path), checked, dict(sidecar or {}))
+
+    def _array(self, columns: tuple[str, ...] | str) -> np.ndarray:
+        arr = self.frame[list(columns) if isinstance(columns, tuple) else columns].to_numpy(dtype=np.float64)
+        arr.setflags(write=False)
+        return arr
+
+    @cached_property
+    def t(self) -> np.ndarray:
+        """Time (N,), s."""
+        return self._array("t")
+
+    @cached_property
+    def alpha(self) -> np.ndarray:
+        """Steering angles (N, 2) = (alpha_l, alpha_r), rad."""
+        return self._array(ALPHA_COLUMNS)
+
+    @cached_property
+    def beta(self) -> np.ndarray:
+        """Wheel angles on the wheel side (N, 4) in wheel order fl, rl, fr, rr, rad."""
+        return self._array(BETA_COLUMNS)
+
+    @cached_property
+    def torque(self) -> np.ndarray:
+        """Motor torques M_mot (N, 4) in wheel order fl, rl, fr, rr, N m (motor side)."""
+        return self._array(TORQUE_COLUMNS)
+
+    @cached_property
+    def segments(self) -> np.ndarray | None:
+        """Segment name of each row (N,) as str, ``""`` for rows in no segment; None without the column."""
+        if SEGMENT_COLUMN not in self.frame.columns:
+            return None
+        cat = pd.Categorical(self.frame[SEGMENT_COLUMN])
+        names = np.array([str(c) for c in cat.categories] + [""])
+        arr = names[cat.codes]  # code -1 (missing) picks the trailing ""
+        arr.setflags(write=False)
+        return arr
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.frame)
+
+    @cached_property
+    def sample_time(self) -> float:
+        """Nominal sample time: the median of the time steps, s."""
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def rate(self) -> float:
+        """Nominal sample rate 1 / sample_time, Hz."""
+        return 1.0 / self.sample_time
+
+    @property
+    def duration(self) -> float:
+        """t[-1] - t[0], s."""
+        return float(self.t[-1] - self.t[0])
+
+    def segment_runs(self) -> tuple[SegmentRun, ...]:
+        """Contiguous runs of rows with the same segment name, in time order (rows in no segment skipped)."""
+        seg = self.segments
+        if seg is None:
+            return ()
+        change = np.flatnonzero(seg[1:] != seg[:-1]) + 1
+        starts = np.concatenate([[0], change])
+        stops = np.concatenate([change, [len(seg)]])
+        t = self.t
+        return tuple(
+            SegmentRun(str(seg[a]), int(a), int(b), float(t[a]), float(t[b - 1]))
+            for a, b in zip(starts, stops)
+            if seg[a] != ""
+        )
+
+    def segment_slices(self) -> dict[str, list[slice]]:
+        """For each segment name present, the row slices of its contiguous runs."""
+        out: dict[str, list[slice]] = {}
+        for run in self.segment_runs():
+            out.setdefault(run.name, []).append(run.slice)
+        return out
+
+
+def _log_suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in LOG_SUFFIXES:
+        raise LogError(f"{path}: unknown log format {path.suffix!r}: expected one of {list(LOG_SUFFIXES)}")
+    return suffix
+
+
+def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
+    """Contents of the YAML sidecar ``<path>.yaml`` of a log, ``{}`` when there is none."""
+    side = sidecar_path(path)
+    if not side.exists():
+        return {}
+    try:
+        data = yaml.safe_load(side.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise LogError(f"{side}: sidecar is not valid YAML: {exc}") from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise LogError(f"{side}: sidecar must hold a mapping at the top level, found {type(data).__name__}")
+    return data
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """Read a Parquet or CSV table as it is (no checks), by suffix."""
+    suffix = _log_suffix(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    try:
+        if suffix == ".parquet":
+            return pd.read_parquet(path)
+        return pd.read_csv(path, skipinitialspace=True)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise LogError(f"{path}: cannot be read as {suffix[1:]}: {exc}") from exc
+
+
+def read_log(path: str | os.PathLike, *, max_gap_samples: float = MAX_GAP_SAMPLES) -> Log:
+    """Read and check a log in our schema (Parquet or CSV by suffix) and its optional sidecar.
+
+    The file is never modified. See :func:`check_frame` for the checks.
+
+    Parameters
+    ----------
+    path : path of ``*.parquet`` or ``*.csv``; the sidecar ``<path>.yaml`` is read when present.
+    max_gap_samples : longest allowed time step, in nominal sample periods (median dt).
+
+    Raises
+    ------
+    LogError
+        The file cannot be read or does not satisfy the schema (message names file, column, row).
+    """
+    path = Path(path)
+    frame = read_table(path)
+    checked = check_frame(frame, path, max_gap_samples=max_gap_samples, csv_rows=path.suffix.lower() == ".csv")
+    return Log(path, checked, read_sidecar(path))
+
+
+def _plain(value: Any) -> Any:
+    """Numpy scalars/arrays and tuples as plain Python for YAML."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def write_log(
+    path: str | os.PathLike,
+    frame: pd.DataFrame | Log,
+    sidecar: dict[str, Any] | None = None,
+    *,
+    max_gap_samples: float = MAX_GAP_SAMPLES,
+) -> Path:
+    """Check ``frame`` with the same checks as :func:`read_log` and write it atomically.
+
+    Parquet for ``*.parquet``, CSV (header line, full float precision) for ``*.csv``. When
+    ``sidecar`` is given it is written atomically to ``<path>.yaml``; when it is None a
+    sidecar left over from an earlier file at ``path`` is removed so that it cannot be
+    mistaken for this log's. A :class:`Log` is written with its own sidecar unless one is given.
+
+    Returns the path written.
+    """
+    path = Path(path)
+    suffix = _log_suffix(path)
+    if isinstance(frame, Log):
+        if sidecar is None and frame.sidecar:
+            sidecar = frame.sidecar
+        frame = frame.frame
+    checked = check_frame(frame, path, max_gap_samples=max_gap_samples)
+    side_text = None
+    if sidecar is not None:
+        if not isinstance(sidecar, dict):
+            raise TypeError(f"sidecar: expected a dict, got {type(sidecar).__name__}")
+        side_text = yaml.safe_dump(_plain(sidecar), sort_keys=False)
+    if suffix == ".parquet":
+        write_atomically(path, lambda tmp: checked.to_parquet(tmp, index=False))
+    else:
+        write_atomically(path, lambda tmp: checked.to_csv(tmp, index=False))
+    side = sidecar_path(path)
+    if side_text is not None:
+        write_text_atomically(side, side_text)
+    else:
+        side.unlink(missing_ok=True)
+    return path
