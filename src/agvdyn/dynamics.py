@@ -1,0 +1,145 @@
+"""Parameter-linear dynamics: regressor Theta (eq. 16), input B u (eq. 17), projection (eq. 19)
+and the feed-forward law (eq. 21).
+
+``Theta(q, q_dot, q_ddot) p = B u + A^T lambda`` with p in the order of eq. (18)
+``(C_l, d_vl, d_cl, C_r, d_vr, d_cr, m_ch, C_ch, d_vw, d_cw, B_w)``; the rows are the nine
+coordinates ``(x_ch, y_ch, gamma_ch, alpha_l, alpha_r, beta_fl, beta_rl, beta_fr, beta_rr)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from agvdyn.kinematics import (
+    MODE_TOLERANCE,
+    N_Q,
+    Mode,
+    _rows,
+    admissible_basis,
+    as_alpha,
+    joint_motion,
+    kinematic_model,
+)
+from agvdyn.platform import EPSILON, PARAMETER_NAMES, Geometry, Parameters
+
+N_P = len(PARAMETER_NAMES)
+_I = {name: i for i, name in enumerate(PARAMETER_NAMES)}
+
+
+def _motion(q_dot, q_ddot) -> tuple[np.ndarray, np.ndarray]:
+    q_dot = np.atleast_2d(np.asarray(q_dot, dtype=float))
+    n = q_dot.shape[0]
+    return _rows(q_dot, n, N_Q, "q_dot"), _rows(q_ddot, n, N_Q, "q_ddot")
+
+
+def regressor(q_dot, q_ddot, epsilon: float = EPSILON) -> np.ndarray:
+    """Regressor Theta(q, q_dot, q_ddot) ``(N, 9, 11)`` of eq. (16), Coulomb friction d_c tanh(v/epsilon).
+
+    Example: a chassis accelerating at 1 m/s^2 has ``Theta[:, 0, m_ch] = 1``.
+    """
+    qd, qdd = _motion(q_dot, q_ddot)
+    n = qd.shape[0]
+    T = np.zeros((n, N_Q, N_P))
+    vx, vy, w = qd[:, 0], qd[:, 1], qd[:, 2]
+    T[:, 0, _I["m_ch"]] = qdd[:, 0] - vy * w
+    T[:, 1, _I["m_ch"]] = qdd[:, 1] + vx * w
+    T[:, 2, _I["C_ch"]] = T[:, 2, _I["C_l"]] = T[:, 2, _I["C_r"]] = qdd[:, 2]
+    for row, (C, dv, dc) in ((3, ("C_l", "d_vl", "d_cl")), (4, ("C_r", "d_vr", "d_cr"))):
+        T[:, row, _I[C]] = qdd[:, row]
+        T[:, row, _I[dv]] = qd[:, row]
+        T[:, row, _I[dc]] = np.tanh(qd[:, row] / epsilon)
+    T[:, 5:, _I["B_w"]] = qdd[:, 5:]
+    T[:, 5:, _I["d_vw"]] = qd[:, 5:]
+    T[:, 5:, _I["d_cw"]] = np.tanh(qd[:, 5:] / epsilon)
+    return T
+
+
+def input_matrix(geom: Geometry) -> np.ndarray:
+    """Input matrix B ``(9, 4)`` of eq. (17): wheel torque = i_G M_mot on each wheel coordinate."""
+    B = np.zeros((N_Q, 4))
+    B[5:, :] = geom.i_G * np.eye(4)
+    return B
+
+
+def projected_regressor(geom: Geometry, mode, alpha, q_dot, q_ddot, *, epsilon: float = EPSILON,
+                        tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Projected regressor H_k^T Theta ``(N, n_k, 11)``: left-hand side of eq. (19).
+
+    Computed from the sparsity of Theta (eq. 16) without forming it: one pass per parameter.
+    """
+    qd, qdd = _motion(q_dot, q_ddot)
+    H = kinematic_model(geom, mode, alpha, tolerance=tolerance)
+    return _project(H, qd, qdd, epsilon)
+
+
+def _project(H: np.ndarray, qd: np.ndarray, qdd: np.ndarray, epsilon: float) -> np.ndarray:
+    n, _, k = H.shape
+    Y = np.empty((n, k, N_P))
+    h = [H[:, i, :] for i in range(N_Q)]
+    col = lambda x: x[:, None]  # noqa: E731
+    rot = h[2] * col(qdd[:, 2])
+    Y[:, :, _I["C_ch"]] = rot
+    Y[:, :, _I["m_ch"]] = h[0] * col(qdd[:, 0] - qd[:, 1] * qd[:, 2]) + h[1] * col(qdd[:, 1] + qd[:, 0] * qd[:, 2])
+    for row, (C, dv, dc) in ((3, ("C_l", "d_vl", "d_cl")), (4, ("C_r", "d_vr", "d_cr"))):
+        Y[:, :, _I[C]] = rot + h[row] * col(qdd[:, row])
+        Y[:, :, _I[dv]] = h[row] * col(qd[:, row])
+        Y[:, :, _I[dc]] = h[row] * col(np.tanh(qd[:, row] / epsilon))
+    Hw = H[:, 5:, :]
+    Y[:, :, _I["d_vw"]] = np.einsum("nik,ni->nk", Hw, qd[:, 5:])
+    Y[:, :, _I["d_cw"]] = np.einsum("nik,ni->nk", Hw, np.tanh(qd[:, 5:] / epsilon))
+    Y[:, :, _I["B_w"]] = np.einsum("nik,ni->nk", Hw, qdd[:, 5:])
+    return Y
+
+
+def projected_input(geom: Geometry, mode, alpha, u, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Generalized torques H_k^T B u ``(N, n_k)`` of the motor torques u ``(N, 4)``: right-hand side of eq. (19)."""
+    H = kinematic_model(geom, mode, alpha, tolerance=tolerance)
+    u = _rows(u, H.shape[0], 4, "u")
+    return geom.i_G * np.einsum("nik,ni->nk", H[:, 5:, :], u)
+
+
+def generalized_forces(q_dot, q_ddot, params: Parameters, epsilon: float = EPSILON) -> np.ndarray:
+    """Model forces Theta(q, q_dot, q_ddot) p ``(N, 9)`` of eq. (15)-(16)."""
+    return regressor(q_dot, q_ddot, epsilon) @ params.to_vector()
+
+
+def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, s_ddot, *,
+                        epsilon: float = EPSILON, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Motor torques u ``(N, 4)`` of the feed-forward law, eq. (21), for a desired motion in mode k.
+
+    ``q_dot, q_ddot`` follow from eq. (4) and (20). The paper distributes ``H_k^T Theta p`` with a
+    right inverse of ``H_k^T B``. Where the axle lines meet in one point (modes 2, 4, straight) the
+    admissible velocities form a 3-dimensional space N (steering either side at rest plus the
+    chassis motion), one direction more than H_k spans; a right inverse of H_k^T B alone may push
+    on that direction and let the passive steering drift. Here u is the minimum-norm solution of
+    ``N^T B u = N^T Theta p``: the net generalized force on every admissible direction is zero, the
+    mode's generalized torques are the model's, and the extra direction gets exactly what holds the
+    steering on the trajectory.
+
+    In mode 3 the steering sits at its stops and the wheel torque patterns of the lateral motion
+    and of steering at rest are linearly dependent (``h_y = (h_l + h_r)/a`` on the wheels): the
+    steering force that the lateral force implies is put on the side whose stop absorbs it (each
+    steering is pressed into its stop, never pulled off).
+    """
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot, tolerance=tolerance)
+    f = generalized_forces(q_dot, q_ddot, params, epsilon)
+    N = admissible_basis(geom, mode, alpha, tolerance=tolerance)
+    M = geom.i_G * np.swapaxes(N[:, 5:, :], 1, 2)  # N^T B  (n, m, 4)
+    g = np.einsum("nim,ni->nm", N, f)
+    if mode is Mode.LATERAL:
+        g = _lateral_steering_targets(geom, g)
+    u = np.einsum("nij,nj->ni", np.linalg.pinv(M, rcond=1e-10), g)
+    return u
+
+
+def _lateral_steering_targets(geom: Geometry, g: np.ndarray) -> np.ndarray:
+    """Mode 3: steering targets (T_l, T_r) consistent with T_l + T_r = a F_y, pressing into the stops.
+
+    The left stop is at -pi/2 (net steering force must be <= 0), the right one at +pi/2 (>= 0).
+    """
+    g = g.copy()
+    excess = geom.a * g[:, 2] - (g[:, 0] + g[:, 1])
+    g[:, 1] += np.where(excess >= 0, excess, 0.0)
+    g[:, 0] += np.where(excess < 0, excess, 0.0)
+    return g

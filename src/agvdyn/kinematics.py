@@ -1,0 +1,409 @@
+"""Kinematics of the platform: rolling constraints, odometry, ICR, motion modes, H_k.
+
+Conventions (PLATFORM.md): ``alpha`` is ``(N, 2)`` = ``(alpha_l, alpha_r)``, the headings of the
+front wheels; the rear wheels are mirrored. ``q_dot`` is ``(N, 9)`` =
+``(v_x, v_y, omega, alpha_l_dot, alpha_r_dot, beta_fl_dot, beta_rl_dot, beta_fr_dot, beta_rr_dot)``
+with body-frame chassis velocities. Every function takes a leading sample axis.
+"""
+from __future__ import annotations
+
+import math
+from enum import IntEnum
+
+import numpy as np
+
+from agvdyn.platform import Geometry
+
+#: Tolerance (rad) on the steering angles of eq. (9) when a measured configuration is assigned
+#: to a motion mode: about 1.1 degree, several times the steering-angle noise and the steady
+#: tracking error of the steering loop, far below the distance between modes.
+MODE_TOLERANCE = 0.02
+#: Tolerance (rad) on values of alpha beyond the mechanical stops at +-pi/2 (encoder round-off).
+STOP_TOLERANCE = 1e-6
+
+_SIDE = np.array([0, 0, 1, 1])  # steering side of each wheel fl, rl, fr, rr (0 = left)
+N_Q = 9
+
+
+class Mode(IntEnum):
+    """Motion modes of eq. (9); STRAIGHT is mode 2 with alpha_v = 0 (sec. 6)."""
+
+    PARKING = 1
+    CAR_LIKE = 2
+    LATERAL = 3
+    ROTATION = 4
+    STRAIGHT = 5
+
+    @property
+    def label(self) -> str:
+        return "2s" if self is Mode.STRAIGHT else str(int(self))
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        """Names of the generalized velocities s_k_dot, eq. (10)-(13)."""
+        return _COORDINATES[self]
+
+    @property
+    def dof(self) -> int:
+        return len(_COORDINATES[self])
+
+    @classmethod
+    def from_label(cls, label: "str | int | Mode") -> "Mode":
+        if isinstance(label, Mode):
+            return label
+        key = str(label).strip().lower()
+        if key in _LABELS:
+            return _LABELS[key]
+        raise ValueError(f"unknown motion mode {label!r}: expected one of {sorted(_LABELS)}")
+
+
+_COORDINATES = {
+    Mode.PARKING: ("alpha_l", "alpha_r"),
+    Mode.CAR_LIKE: ("alpha_v", "x_ch"),
+    Mode.LATERAL: ("y_ch",),
+    Mode.ROTATION: ("gamma_ch",),
+    Mode.STRAIGHT: ("x_ch",),
+}
+_LABELS = {
+    "1": Mode.PARKING, "parking": Mode.PARKING, "alignment": Mode.PARKING,
+    "2": Mode.CAR_LIKE, "car": Mode.CAR_LIKE, "car-like": Mode.CAR_LIKE, "car_like": Mode.CAR_LIKE,
+    "3": Mode.LATERAL, "lateral": Mode.LATERAL,
+    "4": Mode.ROTATION, "rotation": Mode.ROTATION,
+    "2s": Mode.STRAIGHT, "straight": Mode.STRAIGHT, "5": Mode.STRAIGHT,
+}
+
+
+def as_alpha(alpha, *, name: str = "alpha") -> np.ndarray:
+    """Check steering angles ``(N, 2)`` (or ``(2,)``): finite and within the stops [-pi/2, pi/2]."""
+    alpha = np.atleast_2d(np.asarray(alpha, dtype=float))
+    if alpha.ndim != 2 or alpha.shape[1] != 2:
+        raise ValueError(f"{name} of shape {alpha.shape}: expected (N, 2) = (alpha_l, alpha_r)")
+    bad = ~np.isfinite(alpha)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise ValueError(f"{name}[{row}, {('alpha_l', 'alpha_r')[col]}] = {alpha[row, col]}: expected a finite angle")
+    out = np.abs(alpha) > math.pi / 2 + STOP_TOLERANCE
+    if out.any():
+        row, col = np.argwhere(out)[0]
+        raise ValueError(
+            f"{name}[{row}, {('alpha_l', 'alpha_r')[col]}] = {alpha[row, col]:.6g} rad: "
+            f"expected within [-pi/2, pi/2] (mechanical stops)"
+        )
+    return alpha
+
+
+def _rows(x, n: int, width: int, name: str) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 1 and width > 1 and x.shape[0] == width:
+        x = x[None, :]
+    if width == 1 and x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[1] != width or x.shape[0] not in (1, n):
+        raise ValueError(f"{name} of shape {x.shape}: expected ({n}, {width})")
+    if not np.isfinite(x).all():
+        row = int(np.argwhere(~np.isfinite(x))[0, 0])
+        raise ValueError(f"{name}[{row}] = {x[row]}: expected finite values")
+    return np.broadcast_to(x, (n, width))
+
+
+def wheel_headings(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
+    """Headings theta_i ``(N, 4)`` of the wheels fl, rl, fr, rr (rear wheels mirrored)."""
+    return alpha[:, _SIDE] * geom.heading_sign
+
+
+def constraint_matrix(geom: Geometry, alpha) -> np.ndarray:
+    """Constraint matrix A(alpha) ``(N, 8, 9)`` of eq. (1)-(2).
+
+    Rows 0-3: lateral rolling constraints, rows 4-7: longitudinal ones, wheels fl, rl, fr, rr.
+    """
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    theta = wheel_headings(geom, alpha)
+    c, s = np.cos(theta), np.sin(theta)
+    cx, cy = geom.steering_axes.T
+    side = geom.side_sign
+    A = np.zeros((n, 8, N_Q))
+    # lateral: e_lat . (v + omega z x c_i)
+    A[:, :4, 0] = -s
+    A[:, :4, 1] = c
+    A[:, :4, 2] = s * cy + c * cx
+    # longitudinal: e_long . (v + omega z x c_i) - s_i a (omega + theta_i_dot) - r beta_i_dot
+    A[:, 4:, 0] = c
+    A[:, 4:, 1] = s
+    A[:, 4:, 2] = -c * cy + s * cx - side * geom.a
+    wheel = np.arange(4)
+    A[:, 4 + wheel, 3 + _SIDE] = -side * geom.a * geom.heading_sign
+    A[:, 4 + wheel, 5 + wheel] = -geom.r
+    return A
+
+
+def odometry(geom: Geometry, alpha, alpha_dot, beta_dot) -> np.ndarray:
+    """Chassis velocities ``(N, 3)`` = (v_x, v_y, omega) from measured angles and rates, eq. (3).
+
+    ``q_ch_dot = -A_ch^+ (A_alpha alpha_dot + A_beta beta_dot)`` (least squares over all 8 rows).
+    """
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    alpha_dot = _rows(alpha_dot, n, 2, "alpha_dot")
+    beta_dot = _rows(beta_dot, n, 4, "beta_dot")
+    A = constraint_matrix(geom, alpha)
+    A_ch = A[:, :, :3]
+    rhs = -(np.einsum("nij,nj->ni", A[:, :, 3:5], alpha_dot) + np.einsum("nij,nj->ni", A[:, :, 5:], beta_dot))
+    normal = np.einsum("nki,nkj->nij", A_ch, A_ch)
+    return np.linalg.solve(normal, np.einsum("nki,nk->ni", A_ch, rhs)[..., None])[..., 0]
+
+
+# --- ICR relation, eq. (6)-(8) ------------------------------------------------------------
+
+def max_virtual_angle(geom: Geometry) -> float:
+    """Largest |alpha_v| of the car-like mode: the outer wheel reaches its stop at arctan(l/b)."""
+    return math.atan2(geom.l, geom.b)
+
+
+def steering_from_virtual(geom: Geometry, alpha_v) -> np.ndarray:
+    """Steering angles alpha = f_ICR(alpha_v) ``(N, 2)`` of eq. (8).
+
+    From ``l/(2 tan alpha_l) + b/2 = l/(2 tan alpha_r) - b/2 = l/(2 tan alpha_v) = y_ICR``:
+    ``alpha_l = atan2(sin alpha_v, cos alpha_v - (b/l) sin alpha_v)`` and the same with ``+ b/l`` for
+    alpha_r. Example: ``alpha_v = 0.3`` on the prototype gives ``alpha = (0.3716, 0.2510)``.
+    """
+    av = _check_virtual(geom, alpha_v)
+    k = geom.b / geom.l
+    s, c = np.sin(av), np.cos(av)
+    return np.stack([np.arctan2(s, c - k * s), np.arctan2(s, c + k * s)], axis=1)
+
+
+def steering_from_virtual_derivatives(geom: Geometry, alpha_v) -> tuple[np.ndarray, np.ndarray]:
+    """First and second derivatives ``d alpha / d alpha_v`` and ``d2 alpha / d alpha_v2`` ``(N, 2)`` of eq. (8).
+
+    With ``D = sin^2 + (cos -+ k sin)^2 = 1 -+ k sin(2 alpha_v) + k^2 sin^2 alpha_v``:
+    ``d alpha / d alpha_v = 1 / D`` and ``d2 alpha / d alpha_v2 = -D' / D^2``.
+    """
+    av = _check_virtual(geom, alpha_v)
+    k = np.array([geom.b / geom.l, -geom.b / geom.l])
+    s2, c2, s = np.sin(2 * av)[:, None], np.cos(2 * av)[:, None], np.sin(av)[:, None]
+    D = 1 - k * s2 + k**2 * s**2
+    dD = -2 * k * c2 + k**2 * s2
+    return 1 / D, -dD / D**2
+
+
+def _check_virtual(geom: Geometry, alpha_v) -> np.ndarray:
+    av = np.atleast_1d(np.asarray(alpha_v, dtype=float))
+    if av.ndim != 1:
+        raise ValueError(f"alpha_v of shape {av.shape}: expected (N,)")
+    limit = max_virtual_angle(geom)
+    bad = ~np.isfinite(av) | (np.abs(av) > limit + STOP_TOLERANCE)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ValueError(
+            f"alpha_v[{row}] = {av[row]:.6g} rad: expected finite and within +-arctan(l/b) = +-{limit:.6g} "
+            "(beyond it the outer wheel passes its stop at pi/2)"
+        )
+    return av
+
+
+def _virtual_per_side(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
+    k = geom.b / geom.l
+    s, c = np.sin(alpha), np.cos(alpha)
+    return np.stack([np.arctan2(s[:, 0], c[:, 0] + k * s[:, 0]), np.arctan2(s[:, 1], c[:, 1] - k * s[:, 1])], axis=1)
+
+
+def virtual_from_steering(geom: Geometry, alpha) -> np.ndarray:
+    """Virtual steering angle alpha_v ``(N,)``: inverse of eq. (8), mean of both sides' values."""
+    return _virtual_per_side(geom, as_alpha(alpha)).mean(axis=1)
+
+
+def icr_residual(geom: Geometry, alpha) -> np.ndarray:
+    """Residual of the ICR relation f_ICR,lr(alpha) = 0 of eq. (9) as an angle ``(N,)`` (rad).
+
+    Difference of the virtual angles implied by the left and the right side, taken modulo pi
+    (the axle lines are lines, not rays). Zero in modes 2 and 4.
+    """
+    av = _virtual_per_side(geom, as_alpha(alpha))
+    d = av[:, 0] - av[:, 1]
+    return (d + math.pi / 2) % math.pi - math.pi / 2
+
+
+def nominal_steering(geom: Geometry, mode: Mode) -> np.ndarray | None:
+    """Fixed steering angles ``(2,)`` of modes 3, 4 and straight (eq. 9); None for modes 1 and 2."""
+    mode = Mode.from_label(mode)
+    if mode is Mode.LATERAL:
+        return np.array([-math.pi / 2, math.pi / 2])
+    if mode is Mode.ROTATION:
+        return geom.rotation_angle * np.array([-1.0, 1.0])
+    if mode is Mode.STRAIGHT:
+        return np.zeros(2)
+    return None
+
+
+def detect_mode(geom: Geometry, alpha, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Motion mode of each configuration ``(N,)`` as Mode values, eq. (9).
+
+    A row is in mode 3, 4 or straight when both angles are within ``tolerance`` of the mode's
+    fixed angles, in mode 2 when |icr_residual| <= tolerance and |alpha_v| is within the stops,
+    otherwise in mode 1 (checked in that order). Mode detection says which relation the steering
+    angles satisfy; whether the chassis moves is a matter of the velocities.
+    """
+    alpha = as_alpha(alpha)
+    if not tolerance > 0:
+        raise ValueError(f"tolerance={tolerance!r}: expected > 0 rad")
+    mode = np.full(alpha.shape[0], int(Mode.PARKING), dtype=np.int8)
+    car = (np.abs(icr_residual(geom, alpha)) <= tolerance) & (
+        np.abs(virtual_from_steering(geom, alpha)) <= max_virtual_angle(geom) + tolerance
+    )
+    mode[car] = Mode.CAR_LIKE
+    for m in (Mode.STRAIGHT, Mode.ROTATION, Mode.LATERAL):
+        near = np.all(np.abs(alpha - nominal_steering(geom, m)) <= tolerance, axis=1)
+        mode[near] = m
+    return mode
+
+
+def check_mode(geom: Geometry, mode: Mode, alpha: np.ndarray, tolerance: float = MODE_TOLERANCE) -> None:
+    """Raise ValueError naming the first configuration that is not in ``mode``."""
+    mode = Mode.from_label(mode)
+    if mode is Mode.PARKING:
+        return
+    nominal = nominal_steering(geom, mode)
+    if nominal is not None:
+        err = np.max(np.abs(alpha - nominal), axis=1)
+        what = f"alpha = {tuple(np.round(nominal, 6))}"
+    else:
+        err = np.abs(icr_residual(geom, alpha))
+        err = np.where(np.abs(virtual_from_steering(geom, alpha)) <= max_virtual_angle(geom) + tolerance, err, np.inf)
+        what = "the ICR relation of eq. (6)-(8)"
+    bad = err > tolerance
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ValueError(
+            f"alpha[{row}] = ({alpha[row, 0]:.6g}, {alpha[row, 1]:.6g}) rad is not in mode {mode.label} "
+            f"({mode.name.lower()}): expected {what} within {tolerance} rad"
+        )
+
+
+# --- kinematic models H_k, eq. (4), (10)-(13) --------------------------------------------------
+
+def _wheel_rates(geom: Geometry, theta: np.ndarray, twist: np.ndarray, alpha_dot: np.ndarray) -> np.ndarray:
+    """beta_dot ``(N, 4)`` that satisfies the longitudinal constraints for a chassis twist and steering rates."""
+    cx, cy = geom.steering_axes.T
+    vx = twist[:, 0:1] - twist[:, 2:3] * cy
+    vy = twist[:, 1:2] + twist[:, 2:3] * cx
+    theta_dot = alpha_dot[:, _SIDE] * geom.heading_sign
+    return (np.cos(theta) * vx + np.sin(theta) * vy - geom.side_sign * geom.a * (twist[:, 2:3] + theta_dot)) / geom.r
+
+
+def _column(geom: Geometry, theta: np.ndarray, twist: np.ndarray, alpha_dot: np.ndarray) -> np.ndarray:
+    """One admissible velocity q_dot ``(N, 9)`` from a chassis twist and steering rates."""
+    return np.concatenate([twist, alpha_dot, _wheel_rates(geom, theta, twist, alpha_dot)], axis=1)
+
+
+def _constant_model(geom: Geometry, mode: Mode) -> np.ndarray:
+    """H_k ``(9, n_k)`` of the modes whose H_k is constant (1, 3, 4, straight)."""
+    if mode is Mode.PARKING:
+        theta = np.zeros((1, 4))  # wheel rates of pure steering do not depend on theta
+        cols = [_column(geom, theta, np.zeros((1, 3)), np.eye(2)[[i]]) for i in range(2)]
+        return np.concatenate(cols, axis=0).T
+    theta = wheel_headings(geom, nominal_steering(geom, mode)[None, :])
+    twist = {Mode.LATERAL: [0.0, 1.0, 0.0], Mode.ROTATION: [0.0, 0.0, 1.0], Mode.STRAIGHT: [1.0, 0.0, 0.0]}[mode]
+    return _column(geom, theta, np.array([twist]), np.zeros((1, 2))).T
+
+
+def _car_like_model(geom: Geometry, alpha_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """H_2 ``(N, 9, 2)`` and dH_2/d alpha_v ``(N, 9, 2)`` at the virtual angles alpha_v."""
+    n = alpha_v.shape[0]
+    alpha = steering_from_virtual(geom, alpha_v)
+    d1, d2 = steering_from_virtual_derivatives(geom, alpha_v)
+    theta = wheel_headings(geom, alpha)
+    kappa = 2 * np.tan(alpha_v) / geom.l  # curvature 1/y_ICR
+    dkappa = 2 / (geom.l * np.cos(alpha_v) ** 2)
+    zeros3 = np.zeros((n, 3))
+    H = np.empty((n, N_Q, 2))
+    dH = np.empty((n, N_Q, 2))
+    # column alpha_v_dot: steering at rest along the ICR relation
+    H[:, :, 0] = _column(geom, theta, zeros3, d1)
+    dH[:, :, 0] = _column(geom, theta, zeros3, d2)  # linear in alpha_dot, no theta dependence
+    # column x_ch_dot: v_x = 1, v_y = 0, omega = kappa
+    twist = np.stack([np.ones(n), np.zeros(n), kappa], axis=1)
+    H[:, :, 1] = _column(geom, theta, twist, np.zeros((n, 2)))
+    cx, cy = geom.steering_axes.T
+    vx, vy = 1 - kappa[:, None] * cy, kappa[:, None] * cx
+    dtheta = d1[:, _SIDE] * geom.heading_sign
+    c, s = np.cos(theta), np.sin(theta)
+    dwheel = (
+        dtheta * (-s * vx + c * vy) + c * (-dkappa[:, None] * cy) + s * (dkappa[:, None] * cx)
+        - geom.side_sign * geom.a * dkappa[:, None]
+    ) / geom.r
+    dH[:, :, 1] = np.concatenate([np.stack([np.zeros(n), np.zeros(n), dkappa], axis=1), np.zeros((n, 2)), dwheel], axis=1)
+    return H, dH
+
+
+def kinematic_model(geom: Geometry, mode, alpha, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Kinematic model H_k(alpha) ``(N, 9, n_k)`` of motion mode k, eq. (4) and (10)-(13).
+
+    Modes 3, 4 and straight use their nominal steering angles (eq. 9) and mode 2 the configuration
+    on the ICR relation with the measured alpha_v, so that A(alpha) H_k(alpha) = 0 holds exactly;
+    ``alpha`` must be in the mode within ``tolerance`` (ValueError otherwise).
+    """
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    check_mode(geom, mode, alpha, tolerance)
+    if mode is Mode.CAR_LIKE:
+        return _car_like_model(geom, _clip_virtual(geom, alpha))[0]
+    return np.broadcast_to(_constant_model(geom, mode), (alpha.shape[0], N_Q, mode.dof))
+
+
+def _clip_virtual(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
+    limit = max_virtual_angle(geom)
+    return np.clip(virtual_from_steering(geom, alpha), -limit, limit)
+
+
+def kinematic_model_dot(geom: Geometry, mode, alpha, alpha_dot, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Time derivative dH_k/dt(alpha, alpha_dot) ``(N, 9, n_k)`` needed in eq. (20).
+
+    Zero for the modes with constant H_k; in mode 2 ``dH_2/d alpha_v * alpha_v_dot`` with
+    alpha_v_dot the least-squares fit of ``alpha_dot = f_ICR'(alpha_v) alpha_v_dot``.
+    """
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    alpha_dot = _rows(alpha_dot, n, 2, "alpha_dot")
+    check_mode(geom, mode, alpha, tolerance)
+    if mode is not Mode.CAR_LIKE:
+        return np.zeros((n, N_Q, mode.dof))
+    av = _clip_virtual(geom, alpha)
+    d1, _ = steering_from_virtual_derivatives(geom, av)
+    av_dot = np.sum(d1 * alpha_dot, axis=1) / np.sum(d1 * d1, axis=1)
+    return _car_like_model(geom, av)[1] * av_dot[:, None, None]
+
+
+def joint_motion(geom: Geometry, mode, alpha, s_dot, s_ddot, *, tolerance: float = MODE_TOLERANCE):
+    """Joint velocities and accelerations ``(q_dot, q_ddot)``, each ``(N, 9)``, eq. (4) and (20).
+
+    ``q_dot = H_k s_dot``, ``q_ddot = dH_k/dt s_dot + H_k s_ddot``.
+    """
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    s_dot = _rows(s_dot, n, mode.dof, "s_dot")
+    s_ddot = _rows(s_ddot, n, mode.dof, "s_ddot")
+    H = kinematic_model(geom, mode, alpha, tolerance=tolerance)
+    q_dot = np.einsum("nij,nj->ni", H, s_dot)
+    dH = kinematic_model_dot(geom, mode, alpha, q_dot[:, 3:5], tolerance=tolerance)
+    q_ddot = np.einsum("nij,nj->ni", dH, s_dot) + np.einsum("nij,nj->ni", H, s_ddot)
+    return q_dot, q_ddot
+
+
+def admissible_basis(geom: Geometry, mode, alpha, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+    """Basis ``(N, 9, m)`` of all velocities admitted by the rolling constraints in mode k.
+
+    Steering at rest (the columns of H_1) is always admissible; in modes 2, 3, 4 and straight the
+    axle lines meet in one point (or are parallel) and one chassis motion is admissible too, so
+    the null space of A(alpha) has dimension 3 while H_k spans only n_k of it.
+    """
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    H1 = np.broadcast_to(_constant_model(geom, Mode.PARKING), (n, N_Q, 2))
+    if mode is Mode.PARKING:
+        return np.array(H1)
+    H = kinematic_model(geom, mode, alpha, tolerance=tolerance)
+    return np.concatenate([H1, H[:, :, -1:]], axis=2)
