@@ -16,3 +16,8 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
     """Print an error for the user and return the Exit to raise."""
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     return typer.Exit(code)
+
+
+@app.callback()
+def _root() -> None:
+    """agvdyn: model, simulate and identify motion-mode-changing wheeled platforms."""

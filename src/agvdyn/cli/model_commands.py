@@ -1,0 +1,60 @@
+"""Commands on the model itself: identifiability (Table 1)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from agvdyn.cli._app import app, fail
+from agvdyn.identifiability import QR_TOLERANCE, base_parameters, parse_modes, table1
+from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE, PlatformFileError, read_platform
+
+
+def load_platform_option(path: Optional[Path]):
+    """The platform of a --platform option, or the built-in prototype."""
+    if path is None:
+        return PROTOTYPE
+    try:
+        return read_platform(path)
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
+
+
+def _format_row(row) -> str:
+    groups = []
+    for rep in row.identifiable:
+        members = [m for m in row.groups[rep] if m != rep]
+        groups.append(rep + (f" (+{', '.join(members)})" if members else ""))
+    return f"{'{' + ', '.join(m.label for m in row.modes) + '}':<14} {row.rank:>4}   {'  '.join(groups)}"
+
+
+@app.command()
+def identifiability(
+    modes: Optional[str] = typer.Option(None, help="Comma-separated modes, e.g. 1,2s,4 (1, 2, 3, 4, 2s = straight). "
+                                                   "Without it: the rows of Table 1."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    tolerance: float = typer.Option(QR_TOLERANCE, help="Relative |R_ii| below which a parameter is dependent."),
+    samples: int = typer.Option(400, help="Random samples per mode."),
+    seed: int = typer.Option(0, help="Seed of the random motions."),
+) -> None:
+    """Base parameters of motion modes by QR decomposition (paper sec. 6.1, Table 1)."""
+    geom = load_platform_option(platform)
+    try:
+        if modes is not None:
+            rows = [base_parameters(geom, parse_modes(modes), n_samples=samples, seed=seed, tolerance=tolerance)]
+        else:
+            rows = table1(geom, n_samples=samples, seed=seed, tolerance=tolerance)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    if as_json:
+        data = rows[0].to_dict() if modes is not None else [r.to_dict() for r in rows]
+        typer.echo(json.dumps(data, indent=2))
+        return
+    typer.echo(f"Linearly independent parameters (QR, relative tolerance {tolerance:g}, platform {geom.name})")
+    typer.echo(f"{'modes':<14} {'rank':>4}   base parameters (regrouped parameters)")
+    for row in rows:
+        typer.echo(_format_row(row))
+    typer.echo(f"parameter order of eq. (18): {', '.join(PARAMETER_NAMES)}")
