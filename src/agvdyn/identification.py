@@ -1,0 +1,679 @@
+"""Identification of the dynamic parameters from logs: stacked regression of eq. (22)-(25).
+
+Pipeline (paper sec. 6-7)::
+
+    logs -> signals per run of one mode (filtered angles, derivatives, odometry eq. 3)
+         -> rows H_k^T Theta p = H_k^T B u of eq. (19) per sample and generalized coordinate
+         -> filtering of both sides ("parallel", default) or of the torques only ("literal")
+         -> stiction rows dropped (|s_dot| below a threshold, sec. 7)
+         -> stacked system Theta_hat p = tau_hat (eq. 22), known parameters to the right (eq. 24)
+         -> rank check with the names of what is not excited
+         -> column scaling W and least squares (eq. 25), standard deviations from the residual.
+
+The entry point is :func:`identify`; :func:`equation_block` builds the rows of one run from
+given (exact or measured) joint motion, :func:`log_equations` from a log.
+"""
+from __future__ import annotations
+
+import math
+import os
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import scipy.linalg
+
+from agvdyn.dynamics import N_P, projected_input, projected_regressor
+from agvdyn.kinematics import MODE_TOLERANCE, Mode, detect_mode, kinematic_model, nominal_steering, odometry
+from agvdyn.platform import (
+    EPSILON,
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    PROTOTYPE,
+    Geometry,
+    ParameterFile,
+    Parameters,
+    read_platform,
+    write_parameters,
+)
+from agvdyn.signals import (
+    FilterSettings,
+    filtered_derivatives,
+    lowpass,
+    modes_from_segments,
+    parallel_filter,
+    runs,
+    stiction_mask,
+    time_derivative,
+    uniform_sample_time,
+)
+
+__all__ = [
+    "DEFAULT_FIXED",
+    "EXCITATION",
+    "Filtering",
+    "IdentificationSettings",
+    "EquationBlock",
+    "UnidentifiableError",
+    "Dependency",
+    "Estimator",
+    "LeastSquares",
+    "Identification",
+    "equation_block",
+    "log_equations",
+    "stacked_system",
+    "dependent_parameters",
+    "identify",
+    "fit_blocks",
+    "load_logs",
+    "platform_for",
+]
+
+#: Parameters taken as known by default (eq. 24): B_w from a single-axis test (sec. 7).
+DEFAULT_FIXED: Mapping[str, float] = MappingProxyType({"B_w": 0.121})
+
+#: Which experiment excites each parameter (Table 1, PLATFORM.md segment names).
+EXCITATION: Mapping[str, str] = MappingProxyType({
+    "C_l": "steer_left (mode 1: steering the left wheel set at rest)",
+    "d_vl": "steer_left (mode 1: steering the left wheel set at rest)",
+    "d_cl": "steer_left (mode 1: steering the left wheel set at rest)",
+    "C_r": "steer_right (mode 1: steering the right wheel set at rest)",
+    "d_vr": "steer_right (mode 1: steering the right wheel set at rest)",
+    "d_cr": "steer_right (mode 1: steering the right wheel set at rest)",
+    "m_ch": "straight (mode 2 with alpha_v = 0) or lateral (mode 3)",
+    "C_ch": "rotation (mode 4)",
+    "d_vw": "straight, lateral or rotation",
+    "d_cw": "straight, lateral or rotation",
+    "B_w": "a car-like steered motion (mode 2, e.g. lane_change), or fix it from a single-axis test (--fix B_w=...)",
+})
+
+#: Order in which the rank check accepts columns: the representative the paper names for each
+#: group of parameters that multiply the same signal comes first (Table 1: C_ch in rotation,
+#: m_ch in straight motion), B_w last (the paper's dependent parameter p_2, sec. 6.3).
+_RANK_ORDER = ("m_ch", "C_ch", "d_vw", "d_cw", "C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "B_w")
+
+
+class Filtering(str, Enum):
+    """How measurement noise is filtered out of eq. (19).
+
+    PARALLEL (default): the same zero-phase low-pass on every regressor column (tanh Coulomb
+    columns included) and on the torques, so both sides of the equation see the same filter.
+    LITERAL: the paper's wording: filtered angles and derivatives, filtered torques, tanh of
+    the filtered velocity, no filtering of the regressor columns themselves.
+    """
+
+    PARALLEL = "parallel"
+    LITERAL = "literal"
+
+
+@dataclass(frozen=True)
+class IdentificationSettings:
+    """Settings of :func:`identify` (all tuning constants in one frozen place).
+
+    Parameters
+    ----------
+    filter : FilterSettings
+        Zero-phase low-pass (cut-off 40 rad/s by default, sec. 7).
+    filtering : Filtering
+        PARALLEL (default) or LITERAL, see :class:`Filtering`.
+    stiction_threshold : float
+        Rows whose generalized velocity ``|s_dot_k,i|`` is below this are dropped (sec. 7); in
+        the unit of the coordinate (rad/s for steering and rotation, m/s for x_ch, y_ch).
+    mode_tolerance : float
+        Tolerance (rad) of the mode relations (eq. 9) when the rows of a run are projected.
+    epsilon : float
+        Width of the tanh Coulomb model, rad/s.
+    segments : tuple of str or None
+        Segment names used; None: every segment with a mode (see ``signals.SEGMENT_MODES``).
+    rank_tolerance : float
+        A parameter is not identifiable when its (unit-norm) column has a component of relative
+        size below this orthogonal to the columns accepted before it.
+    sample_jitter : float
+        Largest relative deviation of a time step from the median inside a run.
+    """
+
+    filter: FilterSettings = FilterSettings()
+    filtering: Filtering = Filtering.PARALLEL
+    stiction_threshold: float = 0.05
+    mode_tolerance: float = MODE_TOLERANCE
+    epsilon: float = EPSILON
+    segments: tuple[str, ...] | None = None
+    rank_tolerance: float = 1e-6
+    sample_jitter: float = 0.05
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "filtering", Filtering(self.filtering))
+        for key in ("stiction_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter"):
+            value = getattr(self, key)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"identification setting {key}={value!r}: expected a finite number >= 0")
+        if self.epsilon <= 0 or self.mode_tolerance <= 0:
+            raise ValueError("identification settings epsilon and mode_tolerance must be > 0")
+        if self.segments is not None:
+            object.__setattr__(self, "segments", tuple(str(s) for s in self.segments))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "filter_cutoff_rad_s": self.filter.cutoff,
+            "filter_order": self.filter.order,
+            "derivative": self.filter.derivative.value,
+            "filtering": self.filtering.value,
+            "stiction_threshold": self.stiction_threshold,
+            "mode_tolerance": self.mode_tolerance,
+            "epsilon": self.epsilon,
+            "segments": None if self.segments is None else list(self.segments),
+            "rank_tolerance": self.rank_tolerance,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class EquationBlock:
+    """Rows of eq. (19) for one contiguous run in one motion mode.
+
+    Attributes
+    ----------
+    source, segment : where the rows come from (file name, segment name or detected mode).
+    mode : motion mode k of the run.
+    t : (n,) time, s.
+    regressor : (n, n_k, 11) ``H_k^T Theta`` as used in the regression (filtered when set so).
+    torque : (n, n_k) ``H_k^T B u`` as used in the regression.
+    s_dot : (n, n_k) generalized velocities (eq. 10-13).
+    keep : (n, n_k) rows kept after the stiction mask.
+    """
+
+    source: str
+    segment: str
+    mode: Mode
+    t: np.ndarray
+    regressor: np.ndarray
+    torque: np.ndarray
+    s_dot: np.ndarray
+    keep: np.ndarray
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        return self.mode.coordinates
+
+    def model_torque(self, p: np.ndarray) -> np.ndarray:
+        """Model generalized torques ``H_k^T Theta p`` (n, n_k)."""
+        return self.regressor @ np.asarray(p, dtype=float)
+
+
+def _generalized_velocity(H: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
+    """s_dot = H^+ q_dot (least squares on the kinematic model of eq. 4), (n, n_k)."""
+    if H.strides[0] == 0:  # constant model broadcast over samples
+        return q_dot @ np.linalg.pinv(H[0]).T
+    normal = np.einsum("nik,nij->nkj", H, H)
+    rhs = np.einsum("nik,ni->nk", H, q_dot)
+    return np.linalg.solve(normal, rhs[..., None])[..., 0]
+
+
+def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_dot: np.ndarray,
+                   q_ddot: np.ndarray, u: np.ndarray, *, t: np.ndarray | None = None, segment: str = "",
+                   source: str = "", stiction_threshold: float = 0.0, epsilon: float = EPSILON,
+                   mode_tolerance: float = MODE_TOLERANCE) -> EquationBlock:
+    """Rows ``H_k^T Theta(q, q_dot, q_ddot)`` and ``H_k^T B u`` of eq. (19) from given joint motion.
+
+    No filtering: the signals are used as given (exact model signals, or already filtered
+    measurements). Rows with ``|s_dot| < stiction_threshold`` are marked not kept.
+    """
+    mode = Mode.from_label(mode)
+    alpha = np.asarray(alpha, dtype=float)
+    n = alpha.shape[0]
+    try:
+        H = kinematic_model(geometry, mode, alpha, tolerance=mode_tolerance)
+        Y = projected_regressor(geometry, mode, alpha, q_dot, q_ddot, epsilon=epsilon, tolerance=mode_tolerance)
+        tau = projected_input(geometry, mode, alpha, u, tolerance=mode_tolerance)
+    except ValueError as exc:
+        where = f"{source}: " if source else ""
+        raise ValueError(f"{where}segment {segment!r} (mode {mode.label}): {exc}") from exc
+    s_dot = _generalized_velocity(H, np.asarray(q_dot, dtype=float))
+    keep = stiction_mask(s_dot, stiction_threshold)
+    t = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
+    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep)
+
+
+def _run_labels(log: Any, geometry: Geometry, settings: IdentificationSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(name, mode label) per row: from the ``segment`` column, else detected from alpha (eq. 9)."""
+    source = str(getattr(log, "path", None) or "<log>")
+    segments = getattr(log, "segments", None)
+    if segments is not None:
+        names = np.asarray(segments, dtype=object)
+        named = names != ""
+        labels = np.full(names.shape, "", dtype=object)
+        if named.any():
+            labels[named] = modes_from_segments(names[named], source=f"{source}: column 'segment'")
+        if settings.segments is not None:
+            labels[~np.isin(names.astype(str), settings.segments)] = ""
+        return names, labels
+    detected = detect_mode(geometry, log.alpha, settings.mode_tolerance).astype(int)
+    table = np.array([""] + [Mode(m).label for m in range(1, len(Mode) + 1)], dtype=object)
+    labels = table[detected]
+    names = np.array(["mode " + x for x in table], dtype=object)[detected]
+    return names, labels
+
+
+def _chassis_velocity(geometry: Geometry, mode: Mode, alpha: np.ndarray, alpha_dot: np.ndarray,
+                      beta_dot: np.ndarray) -> np.ndarray:
+    """Chassis velocities (v_x, v_y, omega) of a run by odometry, eq. (3).
+
+    Mode 1: the chassis rows of H_1 are zero, so the chassis velocities do not enter eq. (19);
+    zeros are returned. Modes 3, 4 and straight: the core evaluates H_k at the mode's nominal
+    steering angles, and odometry is evaluated there too (its linear map, once). Mode 2: at the
+    measured angles.
+    """
+    n = alpha.shape[0]
+    if mode is Mode.PARKING:
+        return np.zeros((n, 3))
+    nominal = nominal_steering(geometry, mode)
+    if nominal is None:
+        return odometry(geometry, alpha, alpha_dot, beta_dot)
+    unit = np.eye(6)
+    linear_map = odometry(geometry, np.broadcast_to(nominal, (6, 2)), unit[:, :2], unit[:, 2:])  # (6, 3)
+    return np.concatenate([alpha_dot, beta_dot], axis=1) @ linear_map
+
+
+def _run_block(geometry: Geometry, mode: Mode, t: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+               u: np.ndarray, settings: IdentificationSettings, *, segment: str, source: str) -> EquationBlock:
+    """Measured rows of one run: filtered derivatives, odometry, eq. (19), filtering, stiction mask."""
+    where = f"{source}: segment {segment!r} rows starting at t = {t[0]:.6g} s"
+    try:
+        dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'")
+    except ValueError as exc:
+        raise ValueError(str(exc)) from None
+    fs = settings.filter
+    a, a_d, a_dd = filtered_derivatives(alpha, dt, fs)
+    a = np.clip(a, -math.pi / 2, math.pi / 2)  # the filter may overshoot the stops by round-off
+    _, b_d, b_dd = filtered_derivatives(beta, dt, fs)
+    chassis = _chassis_velocity(geometry, mode, a, a_d, b_d)
+    chassis_dd = time_derivative(chassis, dt)
+    q_dot = np.concatenate([chassis, a_d, b_d], axis=1)
+    q_ddot = np.concatenate([chassis_dd, a_dd, b_dd], axis=1)
+    u_used = lowpass(u, dt, fs) if settings.filtering is Filtering.LITERAL else u
+    block = equation_block(geometry, mode, a, q_dot, q_ddot, u_used, t=t, segment=segment, source=source,
+                           stiction_threshold=settings.stiction_threshold, epsilon=settings.epsilon,
+                           mode_tolerance=settings.mode_tolerance)
+    if settings.filtering is Filtering.PARALLEL:
+        Y = parallel_filter(block.regressor, dt, fs)
+        tau = parallel_filter(block.torque, dt, fs)
+        block = EquationBlock(source, segment, mode, t, Y, tau, block.s_dot, block.keep)
+    return block
+
+
+def log_equations(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()
+                  ) -> tuple[list[EquationBlock], list[str]]:
+    """Equation blocks of every usable run of a log, and notes on the runs skipped.
+
+    A run is a maximal range of rows with the same segment name (or, without a ``segment``
+    column, the same detected mode, eq. 9). Runs excluded by the segment table or too short
+    for the zero-phase filter are skipped with a note.
+    """
+    source = str(getattr(log, "path", None) or "<log>")
+    names, labels = _run_labels(log, geometry, settings)
+    key = np.char.add(names.astype(str), np.char.add("|", labels.astype(str)))
+    t_all, alpha, beta, u = log.t, log.alpha, log.beta, log.torque
+    dt_nominal = float(np.median(np.diff(t_all)))
+    padlen = settings.filter.padlen(dt_nominal)
+    blocks, notes = [], []
+    for start, stop in runs(key):
+        label, name = labels[start], str(names[start])
+        if label == "":
+            continue
+        if stop - start <= padlen:
+            notes.append(f"{source}: run {name!r} rows {start}..{stop - 1} skipped: {stop - start} samples, "
+                         f"the zero-phase filter needs more than {padlen}")
+            continue
+        sl = slice(start, stop)
+        blocks.append(_run_block(geometry, Mode.from_label(label), t_all[sl], alpha[sl], beta[sl], u[sl],
+                                 settings, segment=name, source=source))
+    return blocks, notes
+
+
+def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Stacked regressor ``Theta_hat`` (m, 11) and right-hand side ``tau_hat`` (m,) of eq. (22)."""
+    if not blocks:
+        return np.zeros((0, N_P)), np.zeros(0)
+    A = [b.regressor[b.keep] if kept_only else b.regressor.reshape(-1, N_P) for b in blocks]
+    y = [b.torque[b.keep] if kept_only else b.torque.reshape(-1) for b in blocks]
+    return np.concatenate(A), np.concatenate(y)
+
+
+@dataclass(frozen=True)
+class Dependency:
+    """A parameter whose column is (numerically) a combination of the columns of others."""
+
+    name: str
+    combination_of: tuple[str, ...]
+    relative_residual: float
+
+    def describe(self) -> str:
+        if not self.combination_of:
+            how = "its regressor column is zero: the data do not excite it"
+        else:
+            how = f"its regressor column is a combination of those of {', '.join(self.combination_of)}"
+        return f"{self.name} ({how}; excited by {EXCITATION[self.name]})"
+
+
+class UnidentifiableError(ValueError):
+    """The data do not excite some parameters; ``dependencies`` names them."""
+
+    def __init__(self, dependencies: Sequence[Dependency], context: str = "") -> None:
+        self.dependencies = tuple(dependencies)
+        names = [d.name for d in self.dependencies]
+        lines = "\n  ".join(d.describe() for d in self.dependencies)
+        super().__init__(
+            f"{context}parameters {names} cannot be identified from these data:\n  {lines}\n"
+            f"add the experiments named above or fix the parameters as known (e.g. --fix {names[0]}=VALUE)"
+        )
+
+
+def dependent_parameters(A: np.ndarray, names: Sequence[str], *, tolerance: float = 1e-6) -> list[Dependency]:
+    """Parameters whose columns of the stacked regressor are not linearly independent (sec. 6.1).
+
+    Columns are scaled to unit norm (eq. 25) and accepted one by one in the paper's order of
+    representatives (m_ch, C_ch, d_vw, d_cw, C_l, ..., B_w); a column whose part orthogonal to
+    the accepted ones is smaller than ``tolerance`` is dependent. The geometry of the columns is
+    taken from the triangular factor R of ``A = Q R`` (Q orthonormal), so the check costs an
+    11 x 11 problem after one QR of the stacked regressor (Gautier 1991).
+    """
+    names = list(names)
+    norms = np.linalg.norm(A, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    R = scipy.linalg.qr(A / scale, mode="r", check_finite=False)[0][: A.shape[1]]
+    order = sorted(range(len(names)), key=lambda i: _RANK_ORDER.index(names[i]) if names[i] in _RANK_ORDER else 99)
+    accepted: list[int] = []
+    out: list[Dependency] = []
+    for i in order:
+        if norms[i] == 0:
+            out.append(Dependency(names[i], (), 0.0))
+            continue
+        col = R[:, i]
+        if accepted:
+            basis = R[:, accepted]
+            coef, *_ = np.linalg.lstsq(basis, col, rcond=None)
+            residual = float(np.linalg.norm(col - basis @ coef))
+        else:
+            coef, residual = np.zeros(0), float(np.linalg.norm(col))
+        if residual < tolerance:
+            big = [names[j] for j, c in zip(accepted, coef) if abs(c) > 1e-3]
+            out.append(Dependency(names[i], tuple(big), residual))
+        else:
+            accepted.append(i)
+    return sorted(out, key=lambda d: names.index(d.name))
+
+
+class Estimator(ABC):
+    """Interface of the estimators (scikit-learn style): settings in ``__init__``, ``fit`` returns
+    self, fitted results end in ``_``.
+
+    ``fit(A, y)`` takes the stacked regressor of the free parameters and the right-hand side of
+    eq. (24) and sets ``coef_`` (values), ``cov_`` (covariance), ``condition_number_``,
+    ``residual_`` (y - A coef).
+    """
+
+    coef_: np.ndarray
+    cov_: np.ndarray
+    condition_number_: float
+    residual_: np.ndarray
+
+    @abstractmethod
+    def fit(self, A: np.ndarray, y: np.ndarray) -> "Estimator":
+        ...
+
+    @property
+    def std_(self) -> np.ndarray:
+        self._check_fitted()
+        return np.sqrt(np.diag(self.cov_))
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "coef_"):
+            raise RuntimeError(f"{type(self).__name__} is not fitted: call fit(A, y) first")
+
+
+class LeastSquares(Estimator):
+    """Least squares with column scaling, eq. (25).
+
+    ``Theta_1,w = Theta_1 W`` with ``W = diag(1 / ||theta_1,i||)`` (unit-norm columns; the extracted
+    text says W "contains the norms", the reciprocal is the reading that improves the
+    conditioning), ``p_1 = W Theta_1,w^+ (tau - Theta_2 p_2)`` by ``scipy.linalg.lstsq``.
+    Covariance ``sigma^2 W (Theta_1,w^T Theta_1,w)^-1 W`` with ``sigma^2 = |r|^2 / (m - n)``.
+    ``condition_number_`` is ``cond(Theta_1,w^T Theta_1,w)`` (the paper's 11.56),
+    ``condition_number_unscaled_`` the same of the unscaled ``Theta_1``.
+    """
+
+    def __init__(self, *, lapack_driver: str = "gelsd") -> None:
+        self.lapack_driver = lapack_driver
+
+    def fit(self, A: np.ndarray, y: np.ndarray) -> "LeastSquares":
+        A = np.asarray(A, dtype=float)
+        y = np.asarray(y, dtype=float)
+        m, n = A.shape
+        if m <= n:
+            raise ValueError(f"least squares with {m} rows for {n} parameters: expected more rows than parameters")
+        norms = np.linalg.norm(A, axis=0)
+        if np.any(norms == 0):
+            raise ValueError(f"columns {np.flatnonzero(norms == 0).tolist()} of the regressor are zero")
+        Aw = A / norms
+        pw, _, _, sv = scipy.linalg.lstsq(Aw, y, lapack_driver=self.lapack_driver, check_finite=False)
+        residual = y - Aw @ pw
+        sigma2 = float(residual @ residual) / (m - n)
+        gram_inv = np.linalg.inv(Aw.T @ Aw)
+        self.scale_ = 1.0 / norms
+        self.coef_ = pw / norms
+        self.cov_ = sigma2 * gram_inv / np.outer(norms, norms)
+        self.sigma2_ = sigma2
+        self.residual_ = residual
+        self.condition_number_ = float((sv[0] / sv[-1]) ** 2)
+        self.condition_number_unscaled_ = float(np.linalg.cond(A.T @ A))
+        self.n_rows_ = m
+        return self
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Result of :func:`identify`: parameters with uncertainty and the data behind them.
+
+    Attributes
+    ----------
+    parameters : all 11 parameters (fixed ones at their given values).
+    std : standard deviation of each estimated parameter.
+    fixed : names of the parameters taken as known (eq. 24).
+    condition_number : ``cond(Theta_1,w^T Theta_1,w)`` of the column-scaled stacked regressor
+        (the paper's 11.56); ``condition_number_unscaled`` of ``Theta_1^T Theta_1``.
+    residual_rms : RMS of ``tau - Theta p`` over the kept rows, per ``"segment:coordinate"``.
+    blocks : the equation blocks (Fig. 5 data), ``notes``: runs skipped and why.
+    """
+
+    parameters: Parameters
+    std: dict[str, float]
+    fixed: tuple[str, ...]
+    condition_number: float
+    condition_number_unscaled: float
+    residual_rms: dict[str, float]
+    n_rows: int
+    n_samples: int
+    blocks: tuple[EquationBlock, ...]
+    settings: IdentificationSettings
+    geometry: Geometry
+    sources: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    estimator: str = "LeastSquares"
+
+    def to_frame(self) -> pd.DataFrame:
+        """Parameter table: value, std, relative std, unit, fixed; index = parameter name."""
+        rows = []
+        for name in PARAMETER_NAMES:
+            value = getattr(self.parameters, name)
+            std = self.std.get(name, float("nan"))
+            rows.append({"name": name, "value": value, "std": std,
+                         "rel_std": std / abs(value) if value != 0 else float("nan"),
+                         "unit": PARAMETER_UNITS[name], "fixed": name in self.fixed})
+        return pd.DataFrame(rows).set_index("name")
+
+    def torques_frame(self) -> pd.DataFrame:
+        """Measured and model generalized torques per row (long format, Fig. 5)."""
+        p = self.parameters.to_vector()
+        frames = []
+        for b in self.blocks:
+            model = b.model_torque(p)
+            for j, coord in enumerate(b.coordinates):
+                frames.append(pd.DataFrame({
+                    "source": b.source, "segment": b.segment, "mode": b.mode.label, "coordinate": coord,
+                    "t": b.t, "measured": b.torque[:, j], "model": model[:, j], "kept": b.keep[:, j]}))
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def to_parameter_file(self) -> ParameterFile:
+        extra = {
+            "condition_number_unscaled": self.condition_number_unscaled,
+            "residual_rms": dict(self.residual_rms),
+            "n_rows": self.n_rows,
+            "n_samples": self.n_samples,
+            "estimator": self.estimator,
+            "settings": self.settings.to_dict(),
+            "platform": self.geometry.to_dict(),
+            "sources": list(self.sources),
+        }
+        return ParameterFile(self.parameters, dict(self.std), self.fixed, self.condition_number, extra)
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the parameter file (YAML, or JSON by suffix) atomically."""
+        return write_parameters(path, self.to_parameter_file())
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The summary printed by ``agvdyn identify --json``."""
+        return {
+            "parameters": {n: {"value": getattr(self.parameters, n), "std": self.std.get(n)} for n in PARAMETER_NAMES},
+            "condition_number": self.condition_number,
+            "condition_number_unscaled": self.condition_number_unscaled,
+            "fixed": list(self.fixed),
+            "residual_rms": dict(self.residual_rms),
+            "n_rows": self.n_rows,
+            "n_samples": self.n_samples,
+            "filtering": self.settings.filtering.value,
+            "sources": list(self.sources),
+            "notes": list(self.notes),
+        }
+
+
+def load_logs(logs: Any) -> list[Any]:
+    """Logs as :class:`agvdyn.io.Log` objects: paths are read (and checked), logs are passed through."""
+    from agvdyn.io import read_log
+
+    if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha"):
+        logs = [logs]
+    out = [read_log(x) if isinstance(x, (str, os.PathLike)) else x for x in logs]
+    if not out:
+        raise ValueError("no logs given: expected at least one log")
+    return out
+
+
+def platform_for(logs: Sequence[Any], platform: Geometry | str | os.PathLike | None) -> Geometry:
+    """The geometry to use: the one given, else the ``platform`` of the first log's sidecar, else PROTOTYPE."""
+    if isinstance(platform, Geometry):
+        return platform
+    if platform is not None:
+        return read_platform(platform)
+    for log in logs:
+        data = (getattr(log, "sidecar", None) or {}).get("platform")
+        if isinstance(data, Mapping) and all(k in data for k in ("l", "b", "a", "r", "i_G")):
+            return Geometry(**{k: data[k] for k in ("l", "b", "a", "r", "i_G")}, name=str(data.get("name", "sidecar")))
+    return PROTOTYPE
+
+
+def _check_fixed(fixed: Mapping[str, float]) -> dict[str, float]:
+    out = {}
+    for name, value in fixed.items():
+        if name not in PARAMETER_NAMES:
+            raise ValueError(f"fixed parameter {name!r}: expected one of {list(PARAMETER_NAMES)}")
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"fixed parameter {name}={value!r}: expected a finite number")
+        out[name] = float(value)
+    if len(out) == len(PARAMETER_NAMES):
+        raise ValueError("every parameter is fixed: nothing to identify")
+    return out
+
+
+def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
+               settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
+               sources: Iterable[str] = (), notes: Iterable[str] = (), n_samples: int | None = None) -> Identification:
+    """Regression stage: stack the blocks (eq. 22), fixed parameters to the right (eq. 24), rank
+    check naming what is not excited, scaled least squares (eq. 25)."""
+    fixed = _check_fixed(fixed)
+    blocks = tuple(blocks)
+    A, y = stacked_system(blocks)
+    free = [n for n in PARAMETER_NAMES if n not in fixed]
+    idx_free = [PARAMETER_NAMES.index(n) for n in free]
+    p_fixed = np.zeros(N_P)
+    for name, value in fixed.items():
+        p_fixed[PARAMETER_NAMES.index(name)] = value
+    if A.shape[0] <= len(free):
+        raise UnidentifiableError(
+            [Dependency(n, (), 0.0) for n in free],
+            f"{A.shape[0]} equation rows left after the stiction mask for {len(free)} parameters; ")
+    y1 = y - A @ p_fixed  # eq. (24)
+    A1 = A[:, idx_free]
+    missing = dependent_parameters(A1, free, tolerance=settings.rank_tolerance)
+    if missing:
+        raise UnidentifiableError(missing)
+    est = (estimator if estimator is not None else LeastSquares()).fit(A1, y1)
+    p = p_fixed.copy()
+    p[idx_free] = est.coef_
+    std = dict(zip(free, est.std_.tolist()))
+    residual_rms: dict[str, float] = {}
+    for b in blocks:
+        r = b.torque - b.model_torque(p)
+        for j, coord in enumerate(b.coordinates):
+            key = f"{b.segment}:{coord}"
+            sel = r[b.keep[:, j], j]
+            if sel.size:  # coordinates with no kept rows (e.g. the resting side) are not reported
+                residual_rms[key] = float(np.sqrt(np.mean(sel**2)))
+    return Identification(
+        parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
+        condition_number=float(est.condition_number_),
+        condition_number_unscaled=float(getattr(est, "condition_number_unscaled_", float("nan"))),
+        residual_rms=residual_rms, n_rows=int(A.shape[0]),
+        n_samples=int(n_samples if n_samples is not None else sum(b.t.size for b in blocks)),
+        blocks=blocks, settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
+        estimator=type(est).__name__)
+
+
+def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
+             fixed: Mapping[str, float] = DEFAULT_FIXED,
+             settings: IdentificationSettings = IdentificationSettings(),
+             estimator: Estimator | None = None) -> Identification:
+    """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
+
+    Parameters
+    ----------
+    logs : path, Log, or a sequence of them (paths are read with :func:`agvdyn.io.read_log`).
+    platform : Geometry or platform file; default the sidecar's platform, else the prototype.
+    fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
+    settings : :class:`IdentificationSettings`.
+    estimator : an :class:`Estimator`, default :class:`LeastSquares`.
+
+    Raises
+    ------
+    UnidentifiableError
+        When the data do not excite some free parameter (message names it and the experiment
+        that would excite it).
+    """
+    logs = load_logs(logs)
+    geometry = platform_for(logs, platform)
+    blocks, notes = [], []
+    for log in logs:
+        b, n = log_equations(log, geometry, settings)
+        blocks += b
+        notes += n
+    if not blocks:
+        raise ValueError(
+            "no usable rows: the logs contain no run in a motion mode "
+            f"(segments used: {settings.segments or 'all with a mode'})")
+    sources = [str(getattr(log, "path", None) or "<log>") for log in logs]
+    return fit_blocks(blocks, geometry, fixed=fixed, settings=settings, estimator=estimator, sources=sources,
+                      notes=notes, n_samples=sum(len(log.t) for log in logs))
