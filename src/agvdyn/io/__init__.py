@@ -1,7 +1,9 @@
 """Logs in and out: our log schema (Parquet/CSV + YAML sidecar), mapping files, CSV and ROS 2 bags.
 
-Every command that takes a log calls :func:`load_log`.
+Every command that takes a log calls :func:`load_log`; see ``docs/io.md``.
 """
+from agvdyn.io.bag import is_bag, read_bag, write_bag
+from agvdyn.io.load import load_log
 from agvdyn.io.log import (
     LOG_COLUMNS,
     SEGMENT_COLUMN,
@@ -15,8 +17,12 @@ from agvdyn.io.log import (
     sidecar_path,
     write_log,
 )
+from agvdyn.io.mapping import LogMapping, MappingError, Signal, mapping_from_dict, read_mapping
+from agvdyn.io.table import read_mapped_table
 
 __all__ = [
     "LOG_COLUMNS", "SEGMENT_COLUMN", "SEGMENTS", "Log", "LogError", "SegmentRun",
     "check_frame", "read_log", "read_sidecar", "sidecar_path", "write_log",
+    "LogMapping", "MappingError", "Signal", "mapping_from_dict", "read_mapping",
+    "load_log", "read_mapped_table", "is_bag", "read_bag", "write_bag",
 ]

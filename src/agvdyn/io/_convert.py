@@ -1,0 +1,118 @@
+"""Shared steps of converting foreign data to our schema: resampling, segments, coupling check."""
+from __future__ import annotations
+
+from collections.abc import Mapping as MappingABC
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from agvdyn.io.log import LOG_COLUMNS, SEGMENT_COLUMN, LogError
+from agvdyn.io.mapping import HEADING_QUANTITIES, LogMapping, SegmentRange
+
+#: How signals are brought onto one uniform time base (stated in sidecars and docs/io.md).
+RESAMPLING_METHOD = (
+    "linear interpolation of every signal (angles and torques) onto a uniform time base "
+    "over the time range common to all signals; error bound h^2/8 max|f''| for a sample interval h"
+)
+#: Default longest interpolated interval, in periods of the uniform time base.
+DEFAULT_GAP_PERIODS = 5.0
+
+
+@dataclass(frozen=True)
+class Series:
+    """Samples of one signal at increasing times (s, relative to a common origin)."""
+
+    label: str
+    times: np.ndarray
+    values: np.ndarray
+
+
+def uniform_grid(series: MappingABC[str, Series], period: float) -> np.ndarray:
+    """Uniform times ``start + k period`` over the range common to all series."""
+    start = max(float(s.times[0]) for s in series.values())
+    end = min(float(s.times[-1]) for s in series.values())
+    if end <= start:
+        labels = ", ".join(f"{s.label} [{s.times[0]:.6g}, {s.times[-1]:.6g}] s" for s in series.values())
+        raise LogError(f"the signals have no common time range to resample on: {labels}")
+    n = int(np.floor((end - start) / period * (1 + 1e-12) + 1e-9)) + 1
+    return start + np.arange(n) * period
+
+
+def resample(
+    series: MappingABC[str, Series],
+    grid: np.ndarray,
+    max_gap: float,
+    source: str,
+    time_note: str = "",
+) -> dict[str, np.ndarray]:
+    """Linear interpolation of each series onto ``grid`` (see :data:`RESAMPLING_METHOD`).
+
+    Raises
+    ------
+    LogError
+        A series has an interval longer than ``max_gap`` inside the grid's range: the samples
+        there are too sparse to be interpolated honestly. The message names the signal and the time.
+    """
+    out: dict[str, np.ndarray] = {}
+    lo, hi = grid[0], grid[-1]
+    for key, s in series.items():
+        dt = np.diff(s.times)
+        inside = (s.times[1:] > lo) & (s.times[:-1] < hi)
+        bad = inside & (dt > max_gap)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise LogError(
+                f"{source}: {s.label}: no sample between t = {s.times[i]:.6f} s and t = {s.times[i + 1]:.6f} s"
+                f"{time_note} (gap {dt[i]:.6g} s): longer than the {max_gap:.6g} s that may be "
+                "interpolated over; record at a higher rate, cut the log, or raise max_gap in the mapping"
+            )
+        out[key] = np.interp(grid, s.times, s.values)
+    return out
+
+
+def segments_from_ranges(t: np.ndarray, ranges: tuple[SegmentRange, ...]) -> np.ndarray:
+    """Segment name per row from time ranges ``[start, end)``; None outside all ranges."""
+    names = np.full(len(t), None, dtype=object)
+    for r in ranges:
+        names[(t >= r.start) & (t < r.end)] = r.name
+    return names
+
+
+def check_coupling(signals: dict[str, np.ndarray], t: np.ndarray, mapping: LogMapping, source: str) -> dict[str, float]:
+    """Check mapped rear headings against the mirror coupling heading_rl = -alpha_l, heading_rr = -alpha_r.
+
+    Returns the largest deviation of each checked side (rad).
+
+    Raises
+    ------
+    LogError
+        A deviation beyond ``mapping.coupling_tolerance``: a wrong mapping (joint, sign, unit) or a
+        broken steering coupling.
+    """
+    worst: dict[str, float] = {}
+    for heading, alpha in HEADING_QUANTITIES.items():
+        if heading not in signals:
+            continue
+        dev = np.abs(signals[heading] + signals[alpha])
+        i = int(np.argmax(dev))
+        worst[heading] = float(dev[i])
+        if dev[i] > mapping.coupling_tolerance:
+            src = mapping.signal(heading).source
+            raise LogError(
+                f"{source}: {src} ({heading}) = {signals[heading][i]:.6g} rad at t = {t[i]:.6f} s but the mirror "
+                f"coupling of PLATFORM.md requires {heading} = -{alpha} = {-signals[alpha][i]:.6g} rad "
+                f"(deviation {dev[i]:.3g} rad > tolerance {mapping.coupling_tolerance:g} rad): this means a wrong "
+                "mapping (joint names, signs, units) or a broken steering coupling"
+            )
+    return worst
+
+
+def assemble_frame(t: np.ndarray, signals: dict[str, np.ndarray], segments: np.ndarray | None) -> pd.DataFrame:
+    """Our schema's table from SI signals (headings dropped) and optional segment names."""
+    data = {"t": t}
+    data.update({c: signals[c] for c in LOG_COLUMNS[1:]})
+    frame = pd.DataFrame(data)
+    if segments is not None:
+        frame[SEGMENT_COLUMN] = segments  # names are checked by check_frame
+    return frame

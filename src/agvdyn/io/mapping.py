@@ -1,0 +1,425 @@
+"""Mapping files: which joint (ROS 2 bag) or column (CSV/Parquet table) is which log quantity.
+
+A mapping file is YAML; see ``docs/io.md`` and ``examples/mappings/`` for the documented
+format. It is read strictly: unknown keys, wrong types and missing required entries are
+errors naming the file and the key. Conversion of one signal to SI units is affine::
+
+    value_SI = sign * scale * unit_factor * raw / (i_G if the side needs it) + offset
+
+with ``unit_factor`` 1 (rad), pi/180 (deg), 2 pi (rev), 2 pi / counts_per_rev (counts) for
+angles, and 1 (Nm), 1e-3 (mNm), torque_constant (A) for torques. Wheel angles measured on
+the motor side and torques measured on the wheel side are divided by the gear ratio ``i_G``
+(PLATFORM.md: beta is wheel side, M_mot motor side).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from agvdyn.io.log import ALPHA_COLUMNS, BETA_COLUMNS, SEGMENTS, TORQUE_COLUMNS
+
+
+class MappingError(ValueError):
+    """A mapping file that cannot be used; the message names the file and the key."""
+
+
+class InputKind(str, Enum):
+    """What a mapping reads: a ROS 2 bag with JointState messages, or a table (CSV/Parquet)."""
+
+    ROS2_BAG = "ros2_bag"
+    TABLE = "table"
+
+
+class Stamps(str, Enum):
+    """Time of a bag message: its header stamp (receive time if all stamps are zero) or the receive time."""
+
+    HEADER = "header"
+    RECEIVE = "receive"
+
+
+class Side(str, Enum):
+    """Which side of the gear a wheel angle or a torque is measured on."""
+
+    WHEEL = "wheel"
+    MOTOR = "motor"
+
+
+class TimeUnit(str, Enum):
+    S = "s"
+    MS = "ms"
+    US = "us"
+    NS = "ns"
+
+    @property
+    def factor(self) -> float:
+        """Seconds per unit."""
+        return {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[self.value]
+
+
+#: Units of angles and their factor to rad (``counts`` needs counts_per_rev).
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0, "rev": 2.0 * math.pi, "counts": None}
+#: Units of torques and their factor to N m (``A`` needs torque_constant in N m / A).
+TORQUE_UNITS = {"Nm": 1.0, "mNm": 1e-3, "A": None}
+#: Rear wheel headings that may be mapped to check the mirror coupling (PLATFORM.md):
+#: heading_rl = -alpha_l, heading_rr = -alpha_r.
+HEADING_QUANTITIES = {"heading_rl": "alpha_l", "heading_rr": "alpha_r"}
+#: Quantities a mapping must provide, then those it may provide.
+REQUIRED_QUANTITIES = ALPHA_COLUMNS + BETA_COLUMNS + TORQUE_COLUMNS
+OPTIONAL_QUANTITIES = tuple(HEADING_QUANTITIES)
+DEFAULT_TOPIC = "/joint_states"
+#: Default tolerance of the mirror coupling check, rad (about 1.1 degrees).
+DEFAULT_COUPLING_TOLERANCE = 0.02
+
+
+def quantity_kind(quantity: str) -> str:
+    """``"angle"`` for alpha/beta/heading quantities, ``"torque"`` for motor torques."""
+    return "torque" if quantity in TORQUE_COLUMNS else "angle"
+
+
+@dataclass(frozen=True)
+class Signal:
+    """How one log quantity is obtained from one joint or column.
+
+    Attributes
+    ----------
+    quantity : log quantity (``alpha_l``, ``beta_fl``, ``m_fl``, ... or ``heading_rl``/``heading_rr``).
+    source : joint name (bags; position for angles, effort for torques) or column name (tables).
+    unit : one of :data:`ANGLE_UNITS` or :data:`TORQUE_UNITS`.
+    sign : +1 or -1.
+    scale : extra factor on the raw value (for example 0.1 for a value logged in tenths).
+    offset : added after conversion, SI units (an encoder zero, a torque sensor bias).
+    side : gear side of a wheel angle (default wheel) or torque (default motor); None for steering.
+    counts_per_rev : encoder counts per revolution when ``unit`` is ``counts``.
+    torque_constant : N m per A when ``unit`` is ``A`` (torque on ``side``).
+    """
+
+    quantity: str
+    source: str
+    unit: str
+    sign: float = 1.0
+    scale: float = 1.0
+    offset: float = 0.0
+    side: Side | None = None
+    counts_per_rev: float | None = None
+    torque_constant: float | None = None
+
+    @property
+    def kind(self) -> str:
+        return quantity_kind(self.quantity)
+
+    @property
+    def field(self) -> str:
+        """JointState field read for this quantity."""
+        return "effort" if self.kind == "torque" else "position"
+
+    def unit_factor(self) -> float:
+        if self.unit == "counts":
+            return 2.0 * math.pi / float(self.counts_per_rev)
+        if self.unit == "A":
+            return float(self.torque_constant)
+        return float((ANGLE_UNITS | TORQUE_UNITS)[self.unit])
+
+    def gain(self, i_G: float) -> float:
+        """Factor from the raw value to SI units on the side PLATFORM.md uses."""
+        gear = 1.0
+        if self.kind == "angle" and self.side is Side.MOTOR:
+            gear = 1.0 / i_G  # motor encoder / i_G = wheel angle
+        if self.kind == "torque" and self.side is Side.WHEEL:
+            gear = 1.0 / i_G  # wheel torque / i_G = motor torque
+        return self.sign * self.scale * self.unit_factor() * gear
+
+    def to_si(self, raw: np.ndarray, i_G: float) -> np.ndarray:
+        """Raw values -> SI values of the log quantity."""
+        return np.asarray(raw, dtype=np.float64) * self.gain(i_G) + self.offset
+
+    def from_si(self, value: np.ndarray, i_G: float) -> np.ndarray:
+        """SI values of the log quantity -> raw values (inverse of :meth:`to_si`)."""
+        return (np.asarray(value, dtype=np.float64) - self.offset) / self.gain(i_G)
+
+
+@dataclass(frozen=True)
+class SegmentRange:
+    """Rows with ``start <= t < end`` (log time, s) belong to segment ``name``."""
+
+    name: str
+    start: float
+    end: float
+
+
+@dataclass(frozen=True)
+class SegmentColumn:
+    """Segment names taken from a table column, translated by ``names`` (raw value -> segment name)."""
+
+    column: str
+    names: tuple[tuple[str, str], ...] = ()
+
+    def translate(self, raw: str) -> str:
+        return dict(self.names).get(raw, raw)
+
+
+@dataclass(frozen=True)
+class LogMapping:
+    """A checked mapping file (see module docstring and ``docs/io.md``).
+
+    ``rate`` (Hz) is the rate of the uniform time base bags are resampled onto (None: the
+    median message interval, rounded to 1 us); tables are resampled only when it is given.
+    ``max_gap`` (s) is the longest interval between two samples of one signal that is
+    interpolated over (None: 5 sample periods). ``time_column``/``time_unit`` apply to tables.
+    """
+
+    input: InputKind
+    signals: tuple[Signal, ...]
+    topic: str = DEFAULT_TOPIC
+    stamps: Stamps = Stamps.HEADER
+    rate: float | None = None
+    max_gap: float | None = None
+    time_column: str = "t"
+    time_unit: TimeUnit = TimeUnit.S
+    coupling_tolerance: float = DEFAULT_COUPLING_TOLERANCE
+    segments: tuple[SegmentRange, ...] | SegmentColumn | None = None
+    path: Path | None = None
+
+    def __post_init__(self) -> None:
+        names = [s.quantity for s in self.signals]
+        missing = [q for q in REQUIRED_QUANTITIES if q not in names]
+        if missing:
+            raise MappingError(f"{self._where()}signals: missing {missing}: a mapping must give all of {list(REQUIRED_QUANTITIES)}")
+        if len(set(names)) != len(names):
+            raise MappingError(f"{self._where()}signals: a quantity is mapped twice")
+
+    def _where(self) -> str:
+        return f"{self.path}: " if self.path is not None else ""
+
+    def signal(self, quantity: str) -> Signal | None:
+        """The signal of ``quantity``, None if the mapping does not map it (optional quantities)."""
+        return next((s for s in self.signals if s.quantity == quantity), None)
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        """Joint or column names used, in order of first use."""
+        return tuple(dict.fromkeys(s.source for s in self.signals))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain form for sidecars and for writing the mapping back."""
+        out: dict[str, Any] = {"input": self.input.value}
+        if self.input is InputKind.ROS2_BAG:
+            out.update(topic=self.topic, stamps=self.stamps.value)
+        else:
+            out["time"] = {"column": self.time_column, "unit": self.time_unit.value}
+        if self.rate is not None:
+            out["rate"] = self.rate
+        if self.max_gap is not None:
+            out["max_gap"] = self.max_gap
+        out["coupling_tolerance"] = self.coupling_tolerance
+        key = "joint" if self.input is InputKind.ROS2_BAG else "column"
+        sig: dict[str, Any] = {}
+        for s in self.signals:
+            entry: dict[str, Any] = {key: s.source, "unit": s.unit}
+            for name in ("sign", "scale", "offset"):
+                if getattr(s, name) != (1.0 if name != "offset" else 0.0):
+                    entry[name] = getattr(s, name)
+            if s.side is not None:
+                entry["side"] = s.side.value
+            if s.counts_per_rev is not None:
+                entry["counts_per_rev"] = s.counts_per_rev
+            if s.torque_constant is not None:
+                entry["torque_constant"] = s.torque_constant
+            sig[s.quantity] = entry
+        out["signals"] = sig
+        if isinstance(self.segments, SegmentColumn):
+            out["segments"] = {"column": self.segments.column, "names": dict(self.segments.names)}
+        elif self.segments:
+            out["segments"] = [{"name": r.name, "start": r.start, "end": r.end} for r in self.segments]
+        return out
+
+
+# --- parsing ---------------------------------------------------------------------------------
+
+_TOP_KEYS = {"input", "topic", "stamps", "rate", "max_gap", "time", "coupling_tolerance", "signals", "segments", "description"}
+_SIGNAL_KEYS = {"joint", "column", "unit", "sign", "scale", "offset", "side", "counts_per_rev", "torque_constant"}
+
+
+class _Reader:
+    """Strict access to a parsed YAML mapping, with error messages naming file and key."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, key: str, message: str) -> MappingError:
+        return MappingError(f"{self.source}: {key}: {message}")
+
+    def unknown(self, data: dict, allowed: set[str], where: str) -> None:
+        extra = [k for k in data if k not in allowed]
+        if extra:
+            raise self.fail(f"{where}{extra[0]}", f"unknown key: expected one of {sorted(allowed)}")
+
+    def number(self, key: str, value: Any, *, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.fail(key, f"{value!r} is not a finite number")
+        if positive and value <= 0:
+            raise self.fail(key, f"{value!r}: expected a number > 0")
+        return float(value)
+
+    def text(self, key: str, value: Any) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(key, f"{value!r}: expected a non-empty string")
+        return value
+
+    def choice(self, key: str, value: Any, enum: type[Enum]) -> Any:
+        try:
+            return enum(value)
+        except ValueError:
+            raise self.fail(key, f"{value!r}: expected one of {[e.value for e in enum]}") from None
+
+    def mapping(self, key: str, value: Any) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(key, f"expected a mapping, found {type(value).__name__}")
+        return value
+
+
+def _signal(r: _Reader, quantity: str, entry: Any, kind: InputKind) -> Signal:
+    where = f"signals.{quantity}"
+    if isinstance(entry, str):  # shorthand: just the joint or column name
+        entry = {"joint" if kind is InputKind.ROS2_BAG else "column": entry}
+    entry = r.mapping(where, entry)
+    r.unknown(entry, _SIGNAL_KEYS, f"{where}.")
+    src_key, other = ("joint", "column") if kind is InputKind.ROS2_BAG else ("column", "joint")
+    if other in entry:
+        raise r.fail(f"{where}.{other}", f"not allowed for input {kind.value}: use '{src_key}'")
+    if src_key not in entry:
+        raise r.fail(where, f"missing '{src_key}'")
+    source = r.text(f"{where}.{src_key}", entry[src_key])
+    qkind = quantity_kind(quantity)
+    units = ANGLE_UNITS if qkind == "angle" else TORQUE_UNITS
+    unit = entry.get("unit", "rad" if qkind == "angle" else "Nm")
+    if unit not in units:
+        raise r.fail(f"{where}.unit", f"{unit!r}: expected one of {list(units)} for {'an angle' if qkind == 'angle' else 'a torque'}")
+    sign = r.number(f"{where}.sign", entry.get("sign", 1))
+    if sign not in (1.0, -1.0):
+        raise r.fail(f"{where}.sign", f"{entry['sign']!r}: expected 1 or -1")
+    scale = r.number(f"{where}.scale", entry.get("scale", 1.0))
+    if scale == 0:
+        raise r.fail(f"{where}.scale", "expected a non-zero number")
+    offset = r.number(f"{where}.offset", entry.get("offset", 0.0))
+    side: Side | None = None
+    if quantity in BETA_COLUMNS:
+        side = r.choice(f"{where}.side", entry.get("side", "wheel"), Side)
+    elif quantity in TORQUE_COLUMNS:
+        side = r.choice(f"{where}.side", entry.get("side", "motor"), Side)
+    elif "side" in entry:
+        raise r.fail(f"{where}.side", "only wheel angles (beta_*) and torques (m_*) have a gear side")
+    counts = None
+    if unit == "counts":
+        if "counts_per_rev" not in entry:
+            raise r.fail(f"{where}.counts_per_rev", "required when unit is counts")
+        counts = r.number(f"{where}.counts_per_rev", entry["counts_per_rev"], positive=True)
+    elif "counts_per_rev" in entry:
+        raise r.fail(f"{where}.counts_per_rev", f"only used with unit counts, not {unit!r}")
+    kt = None
+    if unit == "A":
+        if "torque_constant" not in entry:
+            raise r.fail(f"{where}.torque_constant", "required when unit is A (N m per A)")
+        kt = r.number(f"{where}.torque_constant", entry["torque_constant"], positive=True)
+    elif "torque_constant" in entry:
+        raise r.fail(f"{where}.torque_constant", f"only used with unit A, not {unit!r}")
+    return Signal(quantity, source, unit, sign, scale, offset, side, counts, kt)
+
+
+def _segments(r: _Reader, value: Any, kind: InputKind) -> tuple[SegmentRange, ...] | SegmentColumn | None:
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        if kind is not InputKind.TABLE:
+            raise r.fail("segments", "a segment column exists only for tables; use a list of {name, start, end} for bags")
+        r.unknown(value, {"column", "names"}, "segments.")
+        if "column" not in value:
+            raise r.fail("segments", "missing 'column'")
+        names = r.mapping("segments.names", value.get("names", {}))
+        for raw, name in names.items():
+            if name not in SEGMENTS:
+                raise r.fail(f"segments.names.{raw}", f"{name!r}: expected one of {list(SEGMENTS)}")
+        return SegmentColumn(r.text("segments.column", value["column"]), tuple((str(k), str(v)) for k, v in names.items()))
+    if not isinstance(value, list):
+        raise r.fail("segments", "expected a list of {name, start, end} or {column, names}")
+    ranges = []
+    for i, item in enumerate(value):
+        where = f"segments[{i}]"
+        item = r.mapping(where, item)
+        r.unknown(item, {"name", "start", "end"}, f"{where}.")
+        for key in ("name", "start", "end"):
+            if key not in item:
+                raise r.fail(where, f"missing '{key}'")
+        if item["name"] not in SEGMENTS:
+            raise r.fail(f"{where}.name", f"{item['name']!r}: expected one of {list(SEGMENTS)}")
+        start, end = r.number(f"{where}.start", item["start"]), r.number(f"{where}.end", item["end"])
+        if end <= start:
+            raise r.fail(where, f"end {end} <= start {start}: expected end > start")
+        ranges.append(SegmentRange(item["name"], start, end))
+    ranges.sort(key=lambda s: s.start)
+    for a, b in zip(ranges, ranges[1:]):
+        if b.start < a.end:
+            raise r.fail("segments", f"{a.name} [{a.start}, {a.end}) overlaps {b.name} [{b.start}, {b.end})")
+    return tuple(ranges)
+
+
+def mapping_from_dict(data: Any, source: str | os.PathLike = "<mapping>") -> LogMapping:
+    """Check a parsed mapping (the YAML structure described in ``docs/io.md``)."""
+    r = _Reader(str(source))
+    data = r.mapping("top level", data)
+    r.unknown(data, _TOP_KEYS, "")
+    if "input" not in data:
+        raise r.fail("input", f"missing: expected one of {[k.value for k in InputKind]}")
+    kind = r.choice("input", data["input"], InputKind)
+    if kind is InputKind.TABLE:
+        for key in ("topic", "stamps"):
+            if key in data:
+                raise r.fail(key, "only used with input ros2_bag")
+    if kind is InputKind.ROS2_BAG and "time" in data:
+        raise r.fail("time", "only used with input table (bags carry their own stamps)")
+    topic = r.text("topic", data.get("topic", DEFAULT_TOPIC))
+    stamps = r.choice("stamps", data.get("stamps", "header"), Stamps)
+    rate = None if data.get("rate") is None else r.number("rate", data["rate"], positive=True)
+    max_gap = None if data.get("max_gap") is None else r.number("max_gap", data["max_gap"], positive=True)
+    time = r.mapping("time", data.get("time", {}))
+    r.unknown(time, {"column", "unit"}, "time.")
+    time_column = r.text("time.column", time.get("column", "t"))
+    time_unit = r.choice("time.unit", time.get("unit", "s"), TimeUnit)
+    tol = r.number("coupling_tolerance", data.get("coupling_tolerance", DEFAULT_COUPLING_TOLERANCE), positive=True)
+    if "signals" not in data:
+        raise r.fail("signals", f"missing: expected a mapping from {list(REQUIRED_QUANTITIES)} to joints or columns")
+    sig_data = r.mapping("signals", data["signals"])
+    allowed = set(REQUIRED_QUANTITIES) | set(OPTIONAL_QUANTITIES)
+    r.unknown(sig_data, allowed, "signals.")
+    missing = [q for q in REQUIRED_QUANTITIES if q not in sig_data]
+    if missing:
+        raise r.fail("signals", f"missing {missing}: a mapping must give all of {list(REQUIRED_QUANTITIES)}")
+    order = [q for q in (*REQUIRED_QUANTITIES, *OPTIONAL_QUANTITIES) if q in sig_data]
+    signals = tuple(_signal(r, q, sig_data[q], kind) for q in order)
+    if kind is InputKind.TABLE:
+        used = {s.source for s in signals}
+        if time_column in used:
+            raise r.fail("time.column", f"{time_column!r} is also mapped as a signal")
+    segments = _segments(r, data.get("segments"), kind)
+    path = Path(source) if source != "<mapping>" else None
+    return LogMapping(kind, signals, topic, stamps, rate, max_gap, time_column, time_unit, tol, segments, path)
+
+
+def read_mapping(path: str | os.PathLike) -> LogMapping:
+    """Read and check a mapping file (YAML). Unknown keys are errors naming the key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MappingError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise MappingError(f"{path}: not valid YAML: {exc}") from exc
+    return mapping_from_dict(data, path)

@@ -1,0 +1,248 @@
+"""ROS 2 bags written with the rosbags writer (sqlite3 and MCAP), read back through a mapping.
+
+The source signals are smooth known functions sampled at irregular stamps, with steering and
+wheel joints in separate messages. Linear interpolation onto the uniform time base has the
+error bound h^2/8 max|f''| (h: longest stamp interval); the tests check against that bound.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from agvdyn.io import Log, LogError, load_log, mapping_from_dict, read_mapping, write_bag
+from agvdyn.io.log import LOG_COLUMNS
+from agvdyn.platform import PROTOTYPE
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "mappings" / "ros2_control.yaml"
+TS = get_typestore(Stores.ROS2_HUMBLE)
+JS = TS.types["sensor_msgs/msg/JointState"]
+HEADER = TS.types["std_msgs/msg/Header"]
+TIME = TS.types["builtin_interfaces/msg/Time"]
+START_NS = 1_731_000_000_123_456_789
+I_G = PROTOTYPE.i_G
+
+STEERING = ["front_left_steering_joint", "rear_left_steering_joint", "front_right_steering_joint", "rear_right_steering_joint"]
+WHEELS = ["front_left_wheel_joint", "rear_left_wheel_joint", "front_right_wheel_joint", "rear_right_wheel_joint"]
+W = 2 * math.pi
+
+
+# Source signals (functions of seconds since START_NS) and bounds of their second derivatives.
+def alpha_l(s): return 0.5 * np.sin(W * 0.3 * s)
+def alpha_r(s): return 0.4 * np.sin(W * 0.2 * s + 0.5)
+def wheel_angle(s, k): return (4.0 + k) * s + 0.3 * np.sin(W * 0.5 * s + k)          # wheel side, rad
+def wheel_torque(s, k): return 20.0 * np.sin(W * 0.4 * s + 0.7 * k) + 5.0             # wheel side, N m
+
+
+FPP = {"alpha": 0.5 * (W * 0.3) ** 2, "beta": 0.3 * (W * 0.5) ** 2, "m": 20.0 * (W * 0.4) ** 2 / I_G}
+
+
+def joint_state(stamp_ns: int, names, position, effort):
+    return JS(
+        header=HEADER(stamp=TIME(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id="base_link"),
+        name=list(names), position=np.asarray(position, dtype=float), velocity=np.array([], dtype=float),
+        effort=np.asarray(effort, dtype=float),
+    )
+
+
+def irregular_stamps(rng, n: int, period_ns: int = 2_000_000, jitter_ns: int = 400_000, offset_ns: int = 0) -> np.ndarray:
+    return START_NS + offset_ns + np.arange(n) * period_ns + rng.integers(-jitter_ns, jitter_ns + 1, n)
+
+
+def write_source_bag(
+    path: Path,
+    storage: str = "sqlite3",
+    *,
+    duration: float = 3.0,
+    seed: int = 1,
+    rear_sign: float = -1.0,
+    wheel_names=WHEELS,
+    topic_type: str = "sensor_msgs/msg/JointState",
+    zero_stamps: bool = False,
+    drop_wheel: slice | None = None,
+    swap_steering: int | None = None,
+) -> dict:
+    """Steering and wheel joints in separate messages at irregular, independent stamps."""
+    rng = np.random.default_rng(seed)
+    n = int(duration / 0.002)
+    st = irregular_stamps(rng, n)
+    wt = irregular_stamps(rng, n, offset_ns=700_000)
+    if drop_wheel is not None:
+        wt = np.delete(wt, np.arange(n)[drop_wheel])
+    header = {int(ns): int(ns) for ns in np.concatenate([st, wt])}
+    if swap_steering is not None:  # two header stamps out of order; receive order unchanged
+        a, b = int(st[swap_steering]), int(st[swap_steering + 1])
+        header[a], header[b] = b, a
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    events = []
+    for ns in st:
+        s = (ns - START_NS) / 1e9
+        a_l, a_r = alpha_l(s), alpha_r(s)
+        events.append((int(ns), STEERING, [a_l, rear_sign * a_l, a_r, rear_sign * a_r], [np.nan] * 4))
+    for ns in wt:
+        s = (ns - START_NS) / 1e9
+        events.append((int(ns), wheel_names, [wheel_angle(s, k) for k in range(4)], [wheel_torque(s, k) for k in range(4)]))
+    events.sort(key=lambda e: e[0])
+    latency = 150_000  # receive time = stamp + 0.15 ms
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        conn = writer.add_connection("/joint_states", topic_type, typestore=TS)
+        other = writer.add_connection("/cmd_vel", "geometry_msgs/msg/Twist", typestore=TS)
+        for i, (ns, names, pos, eff) in enumerate(sorted(events, key=lambda e: e[0])):
+            if topic_type == "sensor_msgs/msg/JointState":
+                msg = joint_state(0 if zero_stamps else header[ns], names, pos, eff)
+                data = TS.serialize_cdr(msg, "sensor_msgs/msg/JointState")
+            else:
+                data = TS.serialize_cdr(TS.types[topic_type](data="x"), topic_type)
+            writer.write(conn, ns + latency * (not zero_stamps), data)
+            if i % 50 == 0:
+                twist = TS.types["geometry_msgs/msg/Twist"]
+                vec = TS.types["geometry_msgs/msg/Vector3"]
+                writer.write(other, ns + 1, TS.serialize_cdr(twist(linear=vec(x=1.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)), "geometry_msgs/msg/Twist"))
+    h_max = max(np.diff(np.sort(st)).max(), np.diff(np.sort(wt)).max()) / 1e9
+    return {"h_max": h_max}
+
+
+def expected(log: Log) -> dict[str, np.ndarray]:
+    s = (log.sidecar["conversion"]["t0_ns"] - START_NS) / 1e9 + log.t
+    out = {"alpha_l": alpha_l(s), "alpha_r": alpha_r(s)}
+    for k, w in enumerate(("fl", "rl", "fr", "rr")):
+        out[f"beta_{w}"] = wheel_angle(s, k)
+        out[f"m_{w}"] = wheel_torque(s, k) / I_G
+    return out
+
+
+def assert_matches_source(log: Log, h_max: float) -> None:
+    exp = expected(log)
+    for col, want in exp.items():
+        bound = h_max**2 / 8 * FPP[col.split("_")[0]] * 1.001 + 1e-9
+        err = np.abs(log.frame[col].to_numpy() - want).max()
+        assert err <= bound, f"{col}: error {err:.3g} > bound {bound:.3g}"
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_bag_with_split_irregular_messages_matches_the_source(tmp_path, storage):
+    info = write_source_bag(tmp_path / "run", storage)
+    log = load_log(tmp_path / "run", EXAMPLE)
+    conv = log.sidecar["conversion"]
+    assert conv["rate"] == pytest.approx(500.0)
+    assert conv["time"] == "header stamp"
+    assert conv["notes"] == []
+    assert "linear interpolation" in conv["method"]
+    np.testing.assert_allclose(np.diff(log.t), 0.002, rtol=1e-9)
+    assert log.t[0] == 0.0
+    assert 2.99 < log.duration < 3.0
+    assert conv["coupling_max_deviation"]["heading_rl"] < 1e-5
+    assert_matches_source(log, info["h_max"])
+
+
+def test_bag_single_storage_files_are_accepted(tmp_path):
+    write_source_bag(tmp_path / "a", "sqlite3", duration=0.5)
+    write_source_bag(tmp_path / "b", "mcap", duration=0.5)
+    la = load_log(tmp_path / "a" / "a.db3", EXAMPLE)
+    lb = load_log(tmp_path / "b" / "b.mcap", EXAMPLE)
+    np.testing.assert_allclose(la.alpha, lb.alpha)
+
+
+def test_explicit_rate_is_used(tmp_path):
+    info = write_source_bag(tmp_path / "run", "sqlite3", duration=1.0)
+    data = read_mapping(EXAMPLE).to_dict()
+    data["rate"] = 250.0
+    log = load_log(tmp_path / "run", mapping_from_dict(data))
+    assert log.sample_time == pytest.approx(0.004)
+    assert_matches_source(log, info["h_max"])
+
+
+def test_zero_header_stamps_fall_back_to_receive_time(tmp_path):
+    info = write_source_bag(tmp_path / "run", "mcap", duration=1.0, zero_stamps=True)
+    log = load_log(tmp_path / "run", EXAMPLE)
+    conv = log.sidecar["conversion"]
+    assert conv["time"] == "bag receive time"
+    assert "zero" in conv["notes"][0]
+    assert_matches_source(log, info["h_max"])
+
+
+def test_missing_joint_is_named(tmp_path):
+    names = ["front_left_wheel_joint", "rear_left_wheel_joint", "front_right_wheel", "rear_right_wheel_joint"]
+    write_source_bag(tmp_path / "run", duration=0.2, wheel_names=names)
+    with pytest.raises(LogError, match=r"joint 'front_right_wheel_joint' \(beta_fr\) not found on /joint_states; joints found: .*'front_right_wheel'"):
+        load_log(tmp_path / "run", EXAMPLE)
+
+
+def test_wrong_topic_type(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.1, topic_type="std_msgs/msg/String")
+    with pytest.raises(LogError, match=r"topic '/joint_states' has message type std_msgs/msg/String: expected sensor_msgs/msg/JointState"):
+        load_log(tmp_path / "run", EXAMPLE)
+
+
+def test_missing_topic(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.1)
+    data = read_mapping(EXAMPLE).to_dict()
+    data["topic"] = "/robot/joint_states"
+    with pytest.raises(LogError, match=r"no topic '/robot/joint_states' in the bag; topics found: .*'/joint_states'"):
+        load_log(tmp_path / "run", mapping_from_dict(data))
+
+
+def test_non_monotonic_stamp(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.5, swap_steering=100)
+    with pytest.raises(LogError, match=r"joint 'front_left_steering_joint': header stamp of message #\d+ goes back"):
+        load_log(tmp_path / "run", EXAMPLE)
+
+
+def test_gap_too_large_to_resample(tmp_path):
+    write_source_bag(tmp_path / "run", duration=1.0, drop_wheel=slice(200, 220))
+    with pytest.raises(LogError, match=r"joint 'front_left_wheel_joint' position \(beta_fl\): no sample between t = 0\.39\d+ s and t = 0\.4[34]\d+ s"):
+        load_log(tmp_path / "run", EXAMPLE)
+
+
+def test_broken_mirror_coupling(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.5, rear_sign=+1.0)
+    with pytest.raises(LogError, match=r"rear_left_steering_joint \(heading_rl\).*mirror coupling.*wrong mapping .* or a broken steering coupling"):
+        load_log(tmp_path / "run", EXAMPLE)
+
+
+def test_bag_without_mapping_is_refused(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.1)
+    with pytest.raises(LogError, match="needs a mapping"):
+        load_log(tmp_path / "run")
+
+
+def test_segments_from_time_ranges(tmp_path):
+    write_source_bag(tmp_path / "run", duration=1.0)
+    data = read_mapping(EXAMPLE).to_dict()
+    data["segments"] = [{"name": "steer_left", "start": 0.0, "end": 0.4}, {"name": "straight", "start": 0.5, "end": 2.0}]
+    log = load_log(tmp_path / "run", mapping_from_dict(data))
+    runs = log.segment_runs()
+    assert [r.name for r in runs] == ["steer_left", "straight"]
+    assert runs[0].t_start == 0.0 and runs[0].t_end < 0.4 <= log.t[runs[0].stop]
+    assert log.t[runs[1].start] >= 0.5 > log.t[runs[1].start - 1]
+
+
+def smooth_log(n: int = 600, dt: float = 0.002) -> Log:
+    import pandas as pd
+
+    t = np.arange(n) * dt
+    data = {"t": t, "alpha_l": alpha_l(t), "alpha_r": alpha_r(t)}
+    for k, w in enumerate(("fl", "rl", "fr", "rr")):
+        data[f"beta_{w}"] = wheel_angle(t, k)
+        data[f"m_{w}"] = wheel_torque(t, k) / I_G
+    frame = pd.DataFrame(data)
+    frame["segment"] = ["steer_left"] * (n // 2) + ["rotation"] * (n - n // 2)
+    return Log.from_frame(frame)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_write_bag_round_trip(tmp_path, storage):
+    log = smooth_log()
+    mapping = read_mapping(EXAMPLE)
+    path = write_bag(log, tmp_path / "out", mapping, storage, geometry=PROTOTYPE)
+    back = load_log(path, mapping)
+    assert back.sidecar["conversion"]["rate"] == pytest.approx(500.0)
+    np.testing.assert_allclose(back.t, log.t, atol=1e-12)
+    for col in LOG_COLUMNS[1:]:
+        np.testing.assert_allclose(back.frame[col], log.frame[col], rtol=1e-12, atol=1e-12, err_msg=col)
+    with pytest.raises(LogError, match="exists already"):
+        write_bag(log, path, mapping, storage, geometry=PROTOTYPE)
