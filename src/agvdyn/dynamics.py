@@ -7,6 +7,7 @@ coordinates ``(x_ch, y_ch, gamma_ch, alpha_l, alpha_r, beta_fl, beta_rl, beta_fr
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from agvdyn.kinematics import (
@@ -16,8 +17,11 @@ from agvdyn.kinematics import (
     _rows,
     admissible_basis,
     as_alpha,
+    car_like_model_into,
+    check_mode,
     joint_motion,
     kinematic_model,
+    max_virtual_angle,
 )
 from agvdyn.platform import EPSILON, PARAMETER_NAMES, Geometry, Parameters
 
@@ -64,30 +68,87 @@ def projected_regressor(geom: Geometry, mode, alpha, q_dot, q_ddot, *, epsilon: 
                         tolerance: float = MODE_TOLERANCE) -> np.ndarray:
     """Projected regressor H_k^T Theta ``(N, n_k, 11)``: left-hand side of eq. (19).
 
-    Computed from the sparsity of Theta (eq. 16) without forming it: one pass per parameter.
+    Computed sample by sample in compiled code from the sparsity of Theta (eq. 16) without forming
+    it; in mode 2, H_2 is evaluated in the same pass (the hot path of identification).
     """
-    qd, qdd = _motion(q_dot, q_ddot)
-    H = kinematic_model(geom, mode, alpha, tolerance=tolerance)
-    return _project(H, qd, qdd, epsilon)
+    mode = Mode.from_label(mode)
+    alpha = as_alpha(alpha)
+    n = alpha.shape[0]
+    qd, qdd = (np.ascontiguousarray(x) for x in _motion(q_dot, q_ddot))
+    if qd.shape[0] != n:
+        raise ValueError(f"q_dot has {qd.shape[0]} rows, alpha {n}: expected the same number of samples")
+    out = np.empty((n, mode.dof, N_P))
+    if mode is Mode.CAR_LIKE:
+        bad = _project_car_like(geom.l, geom.b, geom.a, geom.r, max_virtual_angle(geom), alpha, qd, qdd,
+                                epsilon, tolerance, out)
+        if bad >= 0:
+            check_mode(geom, mode, alpha[bad : bad + 1], tolerance)  # raises with the offending values
+        return out
+    H = kinematic_model(geom, mode, alpha[:1], tolerance=tolerance)[0]
+    check_mode(geom, mode, alpha, tolerance)
+    _project_constant(np.ascontiguousarray(H), qd, qdd, epsilon, out)
+    return out
 
 
-def _project(H: np.ndarray, qd: np.ndarray, qdd: np.ndarray, epsilon: float) -> np.ndarray:
-    n, _, k = H.shape
-    Y = np.empty((n, k, N_P))
-    h = [H[:, i, :] for i in range(N_Q)]
-    col = lambda x: x[:, None]  # noqa: E731
-    rot = h[2] * col(qdd[:, 2])
-    Y[:, :, _I["C_ch"]] = rot
-    Y[:, :, _I["m_ch"]] = h[0] * col(qdd[:, 0] - qd[:, 1] * qd[:, 2]) + h[1] * col(qdd[:, 1] + qd[:, 0] * qd[:, 2])
-    for row, (C, dv, dc) in ((3, ("C_l", "d_vl", "d_cl")), (4, ("C_r", "d_vr", "d_cr"))):
-        Y[:, :, _I[C]] = rot + h[row] * col(qdd[:, row])
-        Y[:, :, _I[dv]] = h[row] * col(qd[:, row])
-        Y[:, :, _I[dc]] = h[row] * col(np.tanh(qd[:, row] / epsilon))
-    Hw = H[:, 5:, :]
-    Y[:, :, _I["d_vw"]] = np.einsum("nik,ni->nk", Hw, qd[:, 5:])
-    Y[:, :, _I["d_cw"]] = np.einsum("nik,ni->nk", Hw, np.tanh(qd[:, 5:] / epsilon))
-    Y[:, :, _I["B_w"]] = np.einsum("nik,ni->nk", Hw, qdd[:, 5:])
-    return Y
+@numba.njit(cache=True)
+def _project_into(H, qd, qdd, tanh_a, tanh_w, out):  # pragma: no cover - compiled
+    """One sample of H^T Theta ``(k, 11)`` from the nonzero entries of Theta, eq. (16) and (19)."""
+    for c in range(H.shape[1]):
+        rot = H[2, c] * qdd[2]
+        out[c, 7] = rot  # C_ch
+        out[c, 6] = H[0, c] * (qdd[0] - qd[1] * qd[2]) + H[1, c] * (qdd[1] + qd[0] * qd[2])  # m_ch
+        out[c, 0] = rot + H[3, c] * qdd[3]  # C_l
+        out[c, 1] = H[3, c] * qd[3]
+        out[c, 2] = H[3, c] * tanh_a[0]
+        out[c, 3] = rot + H[4, c] * qdd[4]  # C_r
+        out[c, 4] = H[4, c] * qd[4]
+        out[c, 5] = H[4, c] * tanh_a[1]
+        dv = dc = bw = 0.0
+        for i in range(4):
+            h = H[5 + i, c]
+            dv += h * qd[5 + i]
+            dc += h * tanh_w[i]
+            bw += h * qdd[5 + i]
+        out[c, 8], out[c, 9], out[c, 10] = dv, dc, bw
+
+
+@numba.njit(cache=True)
+def _tanh_terms(qd, epsilon, tanh_a, tanh_w):  # pragma: no cover - compiled
+    tanh_a[0] = np.tanh(qd[3] / epsilon)
+    tanh_a[1] = np.tanh(qd[4] / epsilon)
+    for i in range(4):
+        tanh_w[i] = np.tanh(qd[5 + i] / epsilon)
+
+
+@numba.njit(cache=True)
+def _project_constant(H, qd, qdd, epsilon, out):  # pragma: no cover - compiled
+    tanh_a, tanh_w = np.empty(2), np.empty(4)
+    for j in range(qd.shape[0]):
+        _tanh_terms(qd[j], epsilon, tanh_a, tanh_w)
+        _project_into(H, qd[j], qdd[j], tanh_a, tanh_w, out[j])
+
+
+@numba.njit(cache=True)
+def _project_car_like(l, b, a, r, limit, alpha, qd, qdd, epsilon, tolerance, out):  # pragma: no cover - compiled
+    """H_2^T Theta for every sample; returns the first row off the ICR relation, or -1."""
+    k = b / l
+    H, dH = np.empty((9, 2)), np.empty((9, 2))
+    tanh_a, tanh_w = np.empty(2), np.empty(4)
+    bad = -1
+    for j in range(alpha.shape[0]):
+        sl, cl = np.sin(alpha[j, 0]), np.cos(alpha[j, 0])
+        sr, cr = np.sin(alpha[j, 1]), np.cos(alpha[j, 1])
+        av_l = np.arctan2(sl, cl + k * sl)
+        av_r = np.arctan2(sr, cr - k * sr)
+        residual = (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
+        av = 0.5 * (av_l + av_r)
+        if bad < 0 and (abs(residual) > tolerance or abs(av) > limit + tolerance):
+            bad = j
+        av = min(max(av, -limit), limit)
+        car_like_model_into(l, b, a, r, av, H, dH)
+        _tanh_terms(qd[j], epsilon, tanh_a, tanh_w)
+        _project_into(H, qd[j], qdd[j], tanh_a, tanh_w, out[j])
+    return bad
 
 
 def projected_input(geom: Geometry, mode, alpha, u, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
+import numba
 import numpy as np
 
 from agvdyn.platform import Geometry
@@ -307,33 +308,62 @@ def _constant_model(geom: Geometry, mode: Mode) -> np.ndarray:
     return _column(geom, theta, np.array([twist]), np.zeros((1, 2))).T
 
 
+@numba.njit(cache=True, fastmath=False)
+def car_like_model_into(l, b, a, r, alpha_v, H, dH):  # pragma: no cover - compiled
+    """H_2 and dH_2/d alpha_v ``(9, 2)`` at one virtual angle, written into ``H`` and ``dH`` (eq. 8, 11).
+
+    Column 0 (alpha_v_dot): steering at rest along the ICR relation; column 1 (x_ch_dot): v_x = 1,
+    v_y = 0, omega = kappa = 2 tan(alpha_v) / l. The single implementation of H_2, shared by
+    ``kinematic_model`` and the fused projection of ``agvdyn.dynamics``.
+    """
+    k = b / l
+    s, c = np.sin(alpha_v), np.cos(alpha_v)
+    s2, c2 = 2 * s * c, c * c - s * s
+    # alpha_l = atan2(s, c - k s), alpha_r = atan2(s, c + k s); D = squared norm of those arguments
+    D_l = 1 - k * s2 + k * k * s * s
+    D_r = 1 + k * s2 + k * k * s * s
+    root_l, root_r = np.sqrt(D_l), np.sqrt(D_r)
+    cos_l, sin_l = (c - k * s) / root_l, s / root_l
+    cos_r, sin_r = (c + k * s) / root_r, s / root_r
+    d1_l, d1_r = 1 / D_l, 1 / D_r
+    d2_l = (2 * k * c2 - k * k * s2) / (D_l * D_l)
+    d2_r = (-2 * k * c2 - k * k * s2) / (D_r * D_r)
+    kappa = 2 * s / (c * l)
+    dkappa = 2 / (l * c * c)
+    H[:, :] = 0.0
+    dH[:, :] = 0.0
+    H[3, 0], H[4, 0], dH[3, 0], dH[4, 0] = d1_l, d1_r, d2_l, d2_r
+    H[0, 1], H[2, 1], dH[2, 1] = 1.0, kappa, dkappa
+    for i in range(4):
+        left = i < 2
+        sigma = 1.0 if i % 2 == 0 else -1.0  # rear wheels mirrored: theta = sigma * alpha
+        side = 1.0 if left else -1.0
+        cx = l / 2 if i % 2 == 0 else -l / 2
+        cy = b / 2 if left else -b / 2
+        d1 = d1_l if left else d1_r
+        d2 = d2_l if left else d2_r
+        ct = cos_l if left else cos_r
+        st = sigma * (sin_l if left else sin_r)
+        vx, vy = 1 - kappa * cy, kappa * cx
+        H[5 + i, 0] = -side * a * sigma * d1 / r
+        dH[5 + i, 0] = -side * a * sigma * d2 / r
+        H[5 + i, 1] = (ct * vx + st * vy - side * a * kappa) / r
+        dH[5 + i, 1] = (sigma * d1 * (-st * vx + ct * vy) - ct * dkappa * cy + st * dkappa * cx - side * a * dkappa) / r
+
+
+@numba.njit(cache=True)
+def _car_like_models(l, b, a, r, alpha_v):  # pragma: no cover - compiled
+    n = alpha_v.shape[0]
+    H = np.empty((n, 9, 2))
+    dH = np.empty((n, 9, 2))
+    for j in range(n):
+        car_like_model_into(l, b, a, r, alpha_v[j], H[j], dH[j])
+    return H, dH
+
+
 def _car_like_model(geom: Geometry, alpha_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """H_2 ``(N, 9, 2)`` and dH_2/d alpha_v ``(N, 9, 2)`` at the virtual angles alpha_v."""
-    n = alpha_v.shape[0]
-    alpha = steering_from_virtual(geom, alpha_v)
-    d1, d2 = steering_from_virtual_derivatives(geom, alpha_v)
-    theta = wheel_headings(geom, alpha)
-    kappa = 2 * np.tan(alpha_v) / geom.l  # curvature 1/y_ICR
-    dkappa = 2 / (geom.l * np.cos(alpha_v) ** 2)
-    zeros3 = np.zeros((n, 3))
-    H = np.empty((n, N_Q, 2))
-    dH = np.empty((n, N_Q, 2))
-    # column alpha_v_dot: steering at rest along the ICR relation
-    H[:, :, 0] = _column(geom, theta, zeros3, d1)
-    dH[:, :, 0] = _column(geom, theta, zeros3, d2)  # linear in alpha_dot, no theta dependence
-    # column x_ch_dot: v_x = 1, v_y = 0, omega = kappa
-    twist = np.stack([np.ones(n), np.zeros(n), kappa], axis=1)
-    H[:, :, 1] = _column(geom, theta, twist, np.zeros((n, 2)))
-    cx, cy = geom.steering_axes.T
-    vx, vy = 1 - kappa[:, None] * cy, kappa[:, None] * cx
-    dtheta = d1[:, _SIDE] * geom.heading_sign
-    c, s = np.cos(theta), np.sin(theta)
-    dwheel = (
-        dtheta * (-s * vx + c * vy) + c * (-dkappa[:, None] * cy) + s * (dkappa[:, None] * cx)
-        - geom.side_sign * geom.a * dkappa[:, None]
-    ) / geom.r
-    dH[:, :, 1] = np.concatenate([np.stack([np.zeros(n), np.zeros(n), dkappa], axis=1), np.zeros((n, 2)), dwheel], axis=1)
-    return H, dH
+    return _car_like_models(geom.l, geom.b, geom.a, geom.r, np.ascontiguousarray(alpha_v, dtype=float))
 
 
 def kinematic_model(geom: Geometry, mode, alpha, *, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
