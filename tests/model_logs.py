@@ -102,6 +102,30 @@ def lane_change_frame(duration: float = 12.0, *, geometry: Geometry = PROTOTYPE,
     return frame, exact
 
 
+def align_frame(alpha0, alpha1, duration: float = 2.0, *, geometry: Geometry = PROTOTYPE,
+                params: Parameters = PAPER_PARAMETERS, dt: float = 2e-3, t0: float = 0.0,
+                beta0: np.ndarray | None = None) -> tuple[pd.DataFrame, dict]:
+    """Wheel alignment at rest (mode 1) from alpha0 to alpha1 along a quintic (rest to rest)."""
+    n = int(round(duration / dt))
+    t = np.arange(n) * dt
+    x = t / duration
+    d = np.asarray(alpha1, dtype=float) - np.asarray(alpha0, dtype=float)
+    shape = 10 * x**3 - 15 * x**4 + 6 * x**5
+    shape_d = (30 * x**2 - 60 * x**3 + 30 * x**4) / duration
+    shape_dd = (60 * x - 180 * x**2 + 120 * x**3) / duration**2
+    alpha = np.asarray(alpha0, dtype=float) + shape[:, None] * d
+    s_dot, s_ddot = shape_d[:, None] * d, shape_dd[:, None] * d
+    H = kinematic_model(geometry, Mode.PARKING, alpha)
+    q_dot, q_ddot = joint_motion(geometry, Mode.PARKING, alpha, s_dot, s_ddot)
+    beta = np.einsum("nij,nj->ni", H[:, 5:, :], alpha - np.asarray(alpha0, dtype=float))
+    if beta0 is not None:
+        beta = beta + beta0
+    u = feedforward_torques(geometry, params, Mode.PARKING, alpha, s_dot, s_ddot)
+    exact = {"mode": Mode.PARKING, "alpha": alpha, "q_dot": q_dot, "q_ddot": q_ddot, "u": u, "s_dot": s_dot,
+             "t": t0 + t}
+    return _frame(t0 + t, alpha, beta, u, "align"), exact
+
+
 def _frame(t, alpha, beta, u, name) -> pd.DataFrame:
     data = {"t": t, "alpha_l": alpha[:, 0], "alpha_r": alpha[:, 1]}
     for i, w in enumerate(("fl", "rl", "fr", "rr")):
@@ -113,18 +137,34 @@ def _frame(t, alpha, beta, u, name) -> pd.DataFrame:
 
 
 def identification_frame(durations: dict[str, float] | None = None, *, geometry: Geometry = PROTOTYPE,
-                         params: Parameters = PAPER_PARAMETERS, dt: float = 2e-3, repeats: int = 1
-                         ) -> tuple[pd.DataFrame, list[dict]]:
-    """The paper's identification sequence (steer_left, steer_right, straight, rotation) in one frame."""
+                         params: Parameters = PAPER_PARAMETERS, dt: float = 2e-3, repeats: int = 1,
+                         align: float = 0.0) -> tuple[pd.DataFrame, list[dict]]:
+    """The paper's identification sequence (steer_left, steer_right, straight, rotation) in one frame.
+
+    ``align > 0``: an ``align`` segment of that duration (s) steers the wheels at rest between two
+    experiments whose steering angles differ, so that the angles are continuous (a real log).
+    """
     durations = durations or {"steer_left": 20.0, "steer_right": 20.0, "straight": 20.0, "rotation": 20.0}
     frames, exact = [], []
     t0 = 0.0
     beta0 = np.zeros(4)
-    for name, duration in durations.items():
-        frame, ex = segment_frame(name, duration, geometry=geometry, params=params, dt=dt, t0=t0, beta0=beta0,
-                                  repeats=repeats)
+    alpha_end = np.zeros(2)
+
+    def add(frame, ex):
+        nonlocal t0, beta0, alpha_end
         frames.append(frame)
         exact.append(ex)
         t0 = float(frame["t"].iloc[-1]) + dt
         beta0 = frame[["beta_fl", "beta_rl", "beta_fr", "beta_rr"]].to_numpy()[-1]
+        alpha_end = frame[["alpha_l", "alpha_r"]].to_numpy()[-1]
+
+    for name, duration in durations.items():
+        frame, ex = segment_frame(name, duration, geometry=geometry, params=params, dt=dt, t0=t0, beta0=beta0,
+                                  repeats=repeats)
+        start = frame[["alpha_l", "alpha_r"]].to_numpy()[0]
+        if align and frames and np.max(np.abs(start - alpha_end)) > 0:
+            add(*align_frame(alpha_end, start, align, geometry=geometry, params=params, dt=dt, t0=t0, beta0=beta0))
+            frame, ex = segment_frame(name, duration, geometry=geometry, params=params, dt=dt, t0=t0,
+                                      beta0=beta0, repeats=repeats)
+        add(frame, ex)
     return pd.concat(frames, ignore_index=True), exact

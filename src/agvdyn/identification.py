@@ -136,6 +136,9 @@ class IdentificationSettings:
         size below this orthogonal to the columns accepted before it.
     sample_jitter : float
         Largest relative deviation of a time step from the median inside a run.
+    rest_speed : float
+        Logs without ``segment`` column: a row whose wheel surface speed not explained by
+        steering is below this (m/s) is taken as mode 1 (at rest), see ``_detected_labels``.
     """
 
     filter: FilterSettings = FilterSettings()
@@ -146,10 +149,12 @@ class IdentificationSettings:
     segments: tuple[str, ...] | None = None
     rank_tolerance: float = 1e-6
     sample_jitter: float = 0.05
+    rest_speed: float = 0.01
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "filtering", Filtering(self.filtering))
-        for key in ("stiction_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter"):
+        for key in ("stiction_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter",
+                    "rest_speed"):
             value = getattr(self, key)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"identification setting {key}={value!r}: expected a finite number >= 0")
@@ -169,6 +174,7 @@ class IdentificationSettings:
             "epsilon": self.epsilon,
             "segments": None if self.segments is None else list(self.segments),
             "rank_tolerance": self.rank_tolerance,
+            "rest_speed": self.rest_speed,
         }
 
 
@@ -239,24 +245,40 @@ def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_do
     return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep)
 
 
-def _run_labels(log: Any, geometry: Geometry, settings: IdentificationSettings) -> tuple[np.ndarray, np.ndarray]:
-    """(name, mode label) per row: from the ``segment`` column, else detected from alpha (eq. 9)."""
+def _segment_labels(log: Any, settings: IdentificationSettings) -> tuple[np.ndarray, np.ndarray] | None:
+    """(name, mode label) per row from the ``segment`` column; None when the log has none."""
     source = str(getattr(log, "path", None) or "<log>")
     segments = getattr(log, "segments", None)
-    if segments is not None:
-        names = np.asarray(segments, dtype=object)
-        named = names != ""
-        labels = np.full(names.shape, "", dtype=object)
-        if named.any():
-            labels[named] = modes_from_segments(names[named], source=f"{source}: column 'segment'")
-        if settings.segments is not None:
-            labels[~np.isin(names.astype(str), settings.segments)] = ""
-        return names, labels
-    detected = detect_mode(geometry, log.alpha, settings.mode_tolerance).astype(int)
-    table = np.array([""] + [Mode(m).label for m in range(1, len(Mode) + 1)], dtype=object)
-    labels = table[detected]
-    names = np.array(["mode " + x for x in table], dtype=object)[detected]
+    if segments is None:
+        return None
+    names = np.asarray(segments, dtype=object)
+    named = names != ""
+    labels = np.full(names.shape, "", dtype=object)
+    if named.any():
+        labels[named] = modes_from_segments(names[named], source=f"{source}: column 'segment'")
+    if settings.segments is not None:
+        labels[~np.isin(names.astype(str), settings.segments)] = ""
     return names, labels
+
+
+def _detected_labels(geometry: Geometry, kin: "_Kinematics", settings: IdentificationSettings
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(name, mode label) per row detected from the filtered signals.
+
+    Eq. (9) tells the mode from the steering angles alone, but a platform at rest is in mode 1
+    whatever its angles (steering at rest, e.g. passing alpha = (0, 0) while steering one side).
+    So a row whose wheel rates are explained by steering alone, i.e. the wheel surface speed left
+    after subtracting the steering-induced rolling of H_1 is below ``settings.rest_speed``, is
+    mode 1; the others get the mode of eq. (9) (``kinematics.detect_mode``).
+    """
+    detected = detect_mode(geometry, kin.alpha, settings.mode_tolerance).astype(int)
+    H1 = kinematic_model(geometry, Mode.PARKING, kin.alpha[:1])[0]
+    rolling = kin.beta_dot - kin.alpha_dot @ H1[5:].T
+    at_rest = np.max(np.abs(rolling), axis=1) * geometry.r < settings.rest_speed
+    detected[at_rest] = int(Mode.PARKING)
+    table = np.array([""] + [Mode(m).label for m in range(1, len(Mode) + 1)], dtype=object)
+    names = np.array(["mode " + x for x in table], dtype=object)
+    return names[detected], table[detected]
 
 
 def _chassis_velocity(geometry: Geometry, mode: Mode, alpha: np.ndarray, alpha_dot: np.ndarray,
@@ -279,29 +301,42 @@ def _chassis_velocity(geometry: Geometry, mode: Mode, alpha: np.ndarray, alpha_d
     return np.concatenate([alpha_dot, beta_dot], axis=1) @ linear_map
 
 
-def _run_block(geometry: Geometry, mode: Mode, t: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
-               u: np.ndarray, settings: IdentificationSettings, *, segment: str, source: str) -> EquationBlock:
-    """Measured rows of one run: filtered derivatives, odometry, eq. (19), filtering, stiction mask."""
-    where = f"{source}: segment {segment!r} rows starting at t = {t[0]:.6g} s"
-    try:
-        dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'")
-    except ValueError as exc:
-        raise ValueError(str(exc)) from None
-    fs = settings.filter
-    a, a_d, a_dd = filtered_derivatives(alpha, dt, fs)
+@dataclass(frozen=True)
+class _Kinematics:
+    """Filtered angles and derivatives of a stretch of a log."""
+
+    dt: float
+    alpha: np.ndarray
+    alpha_dot: np.ndarray
+    alpha_ddot: np.ndarray
+    beta_dot: np.ndarray
+    beta_ddot: np.ndarray
+
+
+def _filtered_kinematics(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings,
+                         where: str) -> _Kinematics:
+    dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'")
+    a, a_d, a_dd = filtered_derivatives(alpha, dt, settings.filter)
     a = np.clip(a, -math.pi / 2, math.pi / 2)  # the filter may overshoot the stops by round-off
-    _, b_d, b_dd = filtered_derivatives(beta, dt, fs)
-    chassis = _chassis_velocity(geometry, mode, a, a_d, b_d)
-    chassis_dd = time_derivative(chassis, dt)
-    q_dot = np.concatenate([chassis, a_d, b_d], axis=1)
-    q_ddot = np.concatenate([chassis_dd, a_dd, b_dd], axis=1)
-    u_used = lowpass(u, dt, fs) if settings.filtering is Filtering.LITERAL else u
+    _, b_d, b_dd = filtered_derivatives(beta, dt, settings.filter)
+    return _Kinematics(dt, a, a_d, a_dd, b_d, b_dd)
+
+
+def _run_block(geometry: Geometry, mode: Mode, t: np.ndarray, kin: _Kinematics, sl: slice, u: np.ndarray,
+               settings: IdentificationSettings, *, segment: str, source: str) -> EquationBlock:
+    """Measured rows of one run: odometry, eq. (19), filtering of both sides, stiction mask."""
+    a = kin.alpha[sl]
+    chassis = _chassis_velocity(geometry, mode, a, kin.alpha_dot[sl], kin.beta_dot[sl])
+    chassis_dd = time_derivative(chassis, kin.dt)
+    q_dot = np.concatenate([chassis, kin.alpha_dot[sl], kin.beta_dot[sl]], axis=1)
+    q_ddot = np.concatenate([chassis_dd, kin.alpha_ddot[sl], kin.beta_ddot[sl]], axis=1)
+    u_used = lowpass(u, kin.dt, settings.filter) if settings.filtering is Filtering.LITERAL else u
     block = equation_block(geometry, mode, a, q_dot, q_ddot, u_used, t=t, segment=segment, source=source,
                            stiction_threshold=settings.stiction_threshold, epsilon=settings.epsilon,
                            mode_tolerance=settings.mode_tolerance)
     if settings.filtering is Filtering.PARALLEL:
-        Y = parallel_filter(block.regressor, dt, fs)
-        tau = parallel_filter(block.torque, dt, fs)
+        Y = parallel_filter(block.regressor, kin.dt, settings.filter)
+        tau = parallel_filter(block.torque, kin.dt, settings.filter)
         block = EquationBlock(source, segment, mode, t, Y, tau, block.s_dot, block.keep)
     return block
 
@@ -310,28 +345,40 @@ def log_equations(log: Any, geometry: Geometry, settings: IdentificationSettings
                   ) -> tuple[list[EquationBlock], list[str]]:
     """Equation blocks of every usable run of a log, and notes on the runs skipped.
 
-    A run is a maximal range of rows with the same segment name (or, without a ``segment``
-    column, the same detected mode, eq. 9). Runs excluded by the segment table or too short
-    for the zero-phase filter are skipped with a note.
+    With a ``segment`` column, every run of one segment name is filtered on its own (a segment
+    boundary may be a jump between experiments) and is one run of its segment's mode. Without
+    it, the whole log is filtered at once and the runs are the ranges of equal mode detected
+    from the filtered steering angles (eq. 9). Runs excluded by the segment table, or too short
+    for the zero-phase filter, are skipped with a note.
     """
     source = str(getattr(log, "path", None) or "<log>")
-    names, labels = _run_labels(log, geometry, settings)
-    key = np.char.add(names.astype(str), np.char.add("|", labels.astype(str)))
     t_all, alpha, beta, u = log.t, log.alpha, log.beta, log.torque
-    dt_nominal = float(np.median(np.diff(t_all)))
-    padlen = settings.filter.padlen(dt_nominal)
+    padlen = settings.filter.padlen(float(np.median(np.diff(t_all))))
+    labelled = _segment_labels(log, settings)
+    if labelled is None:
+        kin = _filtered_kinematics(t_all, alpha, beta, settings, source)
+        names, labels = _detected_labels(geometry, kin, settings)
+        stretches = [(0, len(t_all), kin)]
+    else:
+        names, labels = labelled
+        stretches = [(a, b, None) for a, b in runs(names.astype(str))]
     blocks, notes = [], []
-    for start, stop in runs(key):
-        label, name = labels[start], str(names[start])
-        if label == "":
-            continue
-        if stop - start <= padlen:
-            notes.append(f"{source}: run {name!r} rows {start}..{stop - 1} skipped: {stop - start} samples, "
-                         f"the zero-phase filter needs more than {padlen}")
-            continue
-        sl = slice(start, stop)
-        blocks.append(_run_block(geometry, Mode.from_label(label), t_all[sl], alpha[sl], beta[sl], u[sl],
-                                 settings, segment=name, source=source))
+    for s0, s1, kin in stretches:
+        key = np.char.add(names[s0:s1].astype(str), np.char.add("|", labels[s0:s1].astype(str)))
+        for start, stop in runs(key):
+            label, name = labels[s0 + start], str(names[s0 + start])
+            if label == "":
+                continue
+            if stop - start <= padlen:
+                notes.append(f"{source}: run {name!r} rows {s0 + start}..{s0 + stop - 1} skipped: {stop - start} "
+                             f"samples, the zero-phase filter needs more than {padlen}")
+                continue
+            if kin is None:
+                kin = _filtered_kinematics(t_all[s0:s1], alpha[s0:s1], beta[s0:s1], settings,
+                                           f"{source}: segment {name!r} from row {s0}")
+            sl = slice(s0 + start, s0 + stop)
+            blocks.append(_run_block(geometry, Mode.from_label(label), t_all[sl], kin, slice(start, stop), u[sl],
+                                     settings, segment=name, source=source))
     return blocks, notes
 
 
@@ -401,7 +448,8 @@ def dependent_parameters(A: np.ndarray, names: Sequence[str], *, tolerance: floa
         else:
             coef, residual = np.zeros(0), float(np.linalg.norm(col))
         if residual < tolerance:
-            big = [names[j] for j, c in zip(accepted, coef) if abs(c) > 1e-3]
+            big = sorted((j for j, c in zip(accepted, coef) if abs(c) > 1e-3))
+            big = [names[j] for j in big]
             out.append(Dependency(names[i], tuple(big), residual))
         else:
             accepted.append(i)
@@ -599,6 +647,21 @@ def _check_fixed(fixed: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
+def _residual_rms(blocks: Sequence[EquationBlock], p: np.ndarray) -> dict[str, float]:
+    """RMS of tau - Theta p over the kept rows per "segment:coordinate" (runs of equal name pooled);
+    coordinates with no kept row (e.g. the resting side while the other one steers) are left out."""
+    sums: dict[str, list[float]] = {}
+    for b in blocks:
+        r = b.torque - b.model_torque(p)
+        for j, coord in enumerate(b.coordinates):
+            sel = r[b.keep[:, j], j]
+            if sel.size:
+                acc = sums.setdefault(f"{b.segment}:{coord}", [0.0, 0])
+                acc[0] += float(sel @ sel)
+                acc[1] += sel.size
+    return {k: math.sqrt(s / n) for k, (s, n) in sums.items()}
+
+
 def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
                settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
                sources: Iterable[str] = (), notes: Iterable[str] = (), n_samples: int | None = None) -> Identification:
@@ -625,14 +688,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     p = p_fixed.copy()
     p[idx_free] = est.coef_
     std = dict(zip(free, est.std_.tolist()))
-    residual_rms: dict[str, float] = {}
-    for b in blocks:
-        r = b.torque - b.model_torque(p)
-        for j, coord in enumerate(b.coordinates):
-            key = f"{b.segment}:{coord}"
-            sel = r[b.keep[:, j], j]
-            if sel.size:  # coordinates with no kept rows (e.g. the resting side) are not reported
-                residual_rms[key] = float(np.sqrt(np.mean(sel**2)))
+    residual_rms = _residual_rms(blocks, p)
     return Identification(
         parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
         condition_number=float(est.condition_number_),
