@@ -1,0 +1,1 @@
+"""Closed-loop vehicle simulation (see agvdyn.simulation.simulate)."""
