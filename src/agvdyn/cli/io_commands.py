@@ -1,0 +1,104 @@
+"""Commands on logs: ``agvdyn convert`` (any input -> our schema) and ``agvdyn inspect``."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from agvdyn.cli._app import app, fail
+from agvdyn.io import LogError, MappingError, load_log, write_log
+from agvdyn.io.summary import summarize_log
+from agvdyn.kinematics import MODE_TOLERANCE
+from agvdyn.platform import PROTOTYPE, PlatformFileError, read_platform
+
+_LOAD_ERRORS = (LogError, MappingError, PlatformFileError)
+
+
+def _platform(path: Optional[Path]):
+    if path is None:
+        return PROTOTYPE
+    try:
+        return read_platform(path)
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
+
+
+@app.command()
+def convert(
+    input: Path = typer.Argument(..., help="Log in our schema (.parquet/.csv), any CSV/Parquet table, or a ROS 2 bag (directory, .db3, .mcap)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Log to write in our schema (.parquet or .csv); sidecar <out>.yaml records the conversion."),
+    mapping: Optional[Path] = typer.Option(None, help="Mapping file (YAML) naming joints/columns and units; see examples/mappings/."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML) for the gear ratio i_G; default: the built-in prototype."),
+) -> None:
+    """Convert a ROS 2 bag or a table to our log schema, so that you can look at what was understood."""
+    geom = _platform(platform)
+    if out.resolve() == input.resolve():
+        raise fail(f"{out}: the output would overwrite the input; choose another --out")
+    try:
+        log = load_log(input, mapping, geom)
+        sidecar = dict(log.sidecar)
+        sidecar.setdefault("platform", geom.to_dict())
+        written = write_log(out, log.frame, sidecar)
+    except _LOAD_ERRORS as exc:
+        raise fail(str(exc)) from exc
+    except OSError as exc:
+        raise fail(f"{out}: cannot be written: {exc}") from exc
+    typer.echo(f"wrote {written} ({log.n_samples} samples, {log.duration:.3f} s at {log.rate:.6g} Hz) and {written}.yaml")
+    conv = log.sidecar.get("conversion", {})
+    if conv.get("method"):
+        typer.echo(f"resampled at {conv['rate']:g} Hz: {conv['method']}")
+    for note in conv.get("notes", []) or []:
+        typer.echo(f"note: {note}")
+
+
+@app.command()
+def inspect(
+    log_path: Path = typer.Argument(..., metavar="LOG", help="Log, table or ROS 2 bag (with --mapping)."),
+    mapping: Optional[Path] = typer.Option(None, help="Mapping file for tables with other names/units and for bags."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    tolerance: float = typer.Option(MODE_TOLERANCE, help="Tolerance of the mode detection (rad), eq. (9)."),
+    max_rows: int = typer.Option(40, help="Longest list of mode runs printed; the rest is counted."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Print duration, rate, segments and the motion modes detected over time."""
+    geom = _platform(platform)
+    try:
+        log = load_log(log_path, mapping, geom)
+        summary = summarize_log(log, geom, tolerance=tolerance)
+    except _LOAD_ERRORS as exc:
+        raise fail(str(exc)) from exc
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    if as_json:
+        typer.echo(json.dumps(summary.to_dict(), indent=2))
+        return
+    console = Console(highlight=False)
+    console.print(f"[bold]{log_path}[/bold]")
+    console.print(f"samples   {summary.n_samples}")
+    console.print(f"time      {summary.t_start:.6g} s .. {summary.t_end:.6g} s (duration {summary.duration:.3f} s)")
+    console.print(f"rate      {summary.rate:.6g} Hz (median sample time {summary.sample_time * 1e3:.4g} ms)")
+    for note in summary.notes:
+        console.print(f"note      {note}")
+    if summary.segments:
+        table = Table(title="segments", title_justify="left")
+        for col in ("name", "start (s)", "end (s)", "duration (s)"):
+            table.add_column(col, justify="left" if col == "name" else "right")
+        for s in summary.segments:
+            table.add_row(s.name, f"{s.t_start:.3f}", f"{s.t_end:.3f}", f"{s.duration:.3f}")
+        console.print(table)
+    else:
+        console.print("segments  none (no segment column)")
+    table = Table(title=f"motion modes detected from alpha (eq. 9, tolerance {summary.tolerance:g} rad)", title_justify="left")
+    for col in ("mode", "start (s)", "end (s)", "duration (s)"):
+        table.add_column(col, justify="left" if col == "mode" else "right")
+    for m in summary.modes[:max_rows]:
+        table.add_row(f"{m.mode.label} {m.mode.name.lower()}", f"{m.t_start:.3f}", f"{m.t_end:.3f}", f"{m.duration:.3f}")
+    console.print(table)
+    if len(summary.modes) > max_rows:
+        console.print(f"... {len(summary.modes) - max_rows} more runs (--max-rows, or --json for all)")
+    totals = ", ".join(f"{k}: {v:.3f} s" for k, v in sorted(summary.mode_time.items()))
+    console.print(f"time per mode (rows x sample time)  {totals}")

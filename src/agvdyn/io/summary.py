@@ -1,0 +1,91 @@
+"""What a log holds: duration, rate, segments and the motion modes over time (``agvdyn inspect``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from agvdyn.io.log import Log, SegmentRun
+from agvdyn.kinematics import MODE_TOLERANCE, Mode, detect_mode
+from agvdyn.platform import Geometry
+
+
+@dataclass(frozen=True)
+class ModeRun:
+    """A contiguous run of rows ``start:stop`` detected in one motion mode (eq. 9)."""
+
+    mode: Mode
+    start: int
+    stop: int
+    t_start: float
+    t_end: float
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """Facts about a log: size, timing, segments and motion modes over time."""
+
+    path: str | None
+    n_samples: int
+    t_start: float
+    t_end: float
+    sample_time: float
+    segments: tuple[SegmentRun, ...]
+    modes: tuple[ModeRun, ...]
+    mode_time: dict[str, float]
+    tolerance: float
+    notes: tuple[str, ...]
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+    @property
+    def rate(self) -> float:
+        return 1.0 / self.sample_time
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "path": self.path, "samples": self.n_samples, "t_start": self.t_start, "t_end": self.t_end,
+            "duration": self.duration, "sample_time": self.sample_time, "rate": self.rate,
+            "segments": [{"name": s.name, "start": s.t_start, "end": s.t_end, "duration": s.duration, "rows": [s.start, s.stop]}
+                         for s in self.segments],
+            "modes": [{"mode": m.mode.label, "name": m.mode.name.lower(), "start": m.t_start, "end": m.t_end,
+                       "duration": m.duration, "rows": [m.start, m.stop]} for m in self.modes],
+            "mode_time": self.mode_time, "mode_tolerance": self.tolerance, "notes": list(self.notes),
+        }
+
+
+def mode_runs(geometry: Geometry, log: Log, tolerance: float = MODE_TOLERANCE) -> tuple[ModeRun, ...]:
+    """Contiguous runs of the motion mode detected from ``alpha`` (eq. 9, :func:`detect_mode`)."""
+    modes = detect_mode(geometry, log.alpha, tolerance=tolerance)
+    change = np.flatnonzero(modes[1:] != modes[:-1]) + 1
+    starts = np.concatenate([[0], change])
+    stops = np.concatenate([change, [len(modes)]])
+    t = log.t
+    return tuple(ModeRun(Mode(int(modes[a])), int(a), int(b), float(t[a]), float(t[b - 1])) for a, b in zip(starts, stops))
+
+
+def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLERANCE) -> LogSummary:
+    """Summary of a log for people: timing, segments, detected modes and the time spent in each.
+
+    The time of a mode counts one sample time per row detected in it.
+    """
+    runs = mode_runs(geometry, log, tolerance)
+    mode_time: dict[str, float] = {}
+    for run in runs:
+        key = run.mode.label
+        mode_time[key] = mode_time.get(key, 0.0) + (run.stop - run.start) * log.sample_time
+    conv = log.sidecar.get("conversion", {}) if isinstance(log.sidecar, dict) else {}
+    notes = tuple(str(n) for n in conv.get("notes", []) or [])
+    if conv.get("method") and conv.get("rate"):
+        notes = (f"resampled at {conv['rate']:g} Hz: {conv['method']}",) + notes
+    return LogSummary(
+        str(log.path) if log.path else None, log.n_samples, float(log.t[0]), float(log.t[-1]), log.sample_time,
+        log.segment_runs(), runs, mode_time, tolerance, notes,
+    )

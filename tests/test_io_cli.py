@@ -1,0 +1,96 @@
+"""``agvdyn convert`` and ``agvdyn inspect`` end to end, through the typer app."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from agvdyn.cli import app
+from agvdyn.io import read_log, write_bag, write_log, Log, read_mapping
+from agvdyn.kinematics import Mode, nominal_steering
+from agvdyn.platform import PROTOTYPE
+
+MAPPINGS = Path(__file__).resolve().parents[1] / "examples" / "mappings"
+runner = CliRunner()
+
+
+def mode_log(dt: float = 0.002) -> pd.DataFrame:
+    """1 s straight, 1 s aligning the wheels at rest, 1 s pure rotation."""
+    t = np.arange(int(3.0 / dt)) * dt
+    rot = nominal_steering(PROTOTYPE, Mode.ROTATION)
+    ramp = np.clip(t - 1.0, 0.0, 1.0)[:, None]  # 0 before 1 s, 1 after 2 s
+    alpha = ramp * rot[None, :]
+    data = {"t": t, "alpha_l": alpha[:, 0], "alpha_r": alpha[:, 1]}
+    for k, w in enumerate(("fl", "rl", "fr", "rr")):
+        data[f"beta_{w}"] = 0.5 * t + k
+        data[f"m_{w}"] = np.sin(t + k)
+    frame = pd.DataFrame(data)
+    frame["segment"] = np.where(t < 1.0, "straight", np.where(t < 2.0, "align", "rotation"))
+    return frame
+
+
+def test_inspect_reports_segments_and_modes(tmp_path):
+    path = write_log(tmp_path / "run.parquet", mode_log())
+    result = runner.invoke(app, ["inspect", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.output)
+    assert info["samples"] == 1500
+    assert info["rate"] == pytest.approx(500.0)
+    assert info["duration"] == pytest.approx(2.998)
+    assert [(s["name"], s["start"]) for s in info["segments"]] == [("straight", 0.0), ("align", 1.0), ("rotation", 2.0)]
+    modes = [(m["mode"], m["start"], m["end"]) for m in info["modes"]]
+    assert [m[0] for m in modes] == ["2s", "1", "4"]
+    # Mode changes where |alpha - nominal| crosses the 0.02 rad tolerance on the ramp.
+    rot = float(np.max(np.abs(nominal_steering(PROTOTYPE, Mode.ROTATION))))
+    assert modes[1][1] == pytest.approx(1.0 + 0.02 / rot, abs=0.003)
+    assert modes[2][1] == pytest.approx(2.0 - 0.02 / rot, abs=0.003)
+    text = runner.invoke(app, ["inspect", str(path)])
+    assert text.exit_code == 0
+    assert "straight" in text.output and "4 rotation" in text.output and "500 Hz" in text.output
+
+
+def test_convert_bag_then_inspect(tmp_path):
+    mapping = MAPPINGS / "ros2_control.yaml"
+    log = Log.from_frame(mode_log())
+    bag = write_bag(log, tmp_path / "bag", read_mapping(mapping), "mcap", geometry=PROTOTYPE)
+    out = tmp_path / "run.parquet"
+    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(mapping), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "resampled at 500 Hz" in result.output
+    back = read_log(out)
+    np.testing.assert_allclose(back.alpha, log.alpha, atol=1e-12)
+    assert back.sidecar["conversion"]["input"] == "ros2_bag"
+    assert back.sidecar["platform"]["i_G"] == PROTOTYPE.i_G
+    result = runner.invoke(app, ["inspect", str(bag), "--mapping", str(mapping), "--json"])
+    assert result.exit_code == 0, result.output
+    assert [m["mode"] for m in json.loads(result.output)["modes"]] == ["2s", "1", "4"]
+
+
+def test_errors_are_clean_with_exit_code_2(tmp_path):
+    frame = mode_log()
+    frame.loc[10, "t"] = frame.loc[9, "t"]
+    bad = tmp_path / "bad.csv"
+    frame.to_csv(bad, index=False)
+    for args in (["inspect", str(bad)], ["convert", str(bad), "--out", str(tmp_path / "x.parquet")]):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2
+        assert "error:" in result.output and "duplicated time" in result.output
+        assert "Traceback" not in result.output
+    assert not (tmp_path / "x.parquet").exists()
+    result = runner.invoke(app, ["inspect", str(tmp_path / "nothing.parquet")])
+    assert result.exit_code == 2 and "no such file" in result.output
+    (tmp_path / "m.yaml").write_text("input: table\nsignals: {}\nfoo: 1\n")
+    result = runner.invoke(app, ["convert", str(bad), "--mapping", str(tmp_path / "m.yaml"), "--out", str(tmp_path / "y.csv")])
+    assert result.exit_code == 2 and "foo: unknown key" in result.output
+
+
+def test_convert_refuses_to_overwrite_its_input(tmp_path):
+    path = write_log(tmp_path / "run.csv", mode_log())
+    before = path.read_bytes()
+    result = runner.invoke(app, ["convert", str(path), "--out", str(path)])
+    assert result.exit_code == 2 and "overwrite the input" in result.output
+    assert path.read_bytes() == before
