@@ -182,3 +182,13 @@ def test_configuration_not_in_mode_is_refused():
         steering_from_virtual(PROTOTYPE, [1.2])
     with pytest.raises(ValueError, match="unknown motion mode"):
         Mode.from_label("6")
+
+
+def test_odometry_equals_pseudoinverse_of_eq_3_on_inconsistent_rates():
+    """Random (slipping) rates: the compiled solve equals -A_ch^+ (A_alpha alpha_dot + A_beta beta_dot)."""
+    rng = np.random.default_rng(7)
+    alpha, alpha_dot, beta_dot = rng.uniform(-1.5, 1.5, (50, 2)), rng.normal(size=(50, 2)), rng.normal(size=(50, 4))
+    A = constraint_matrix(PROTOTYPE, alpha)
+    rhs = np.einsum("nij,nj->ni", A[:, :, 3:5], alpha_dot) + np.einsum("nij,nj->ni", A[:, :, 5:], beta_dot)
+    expected = -np.einsum("nij,nj->ni", np.linalg.pinv(A[:, :, :3]), rhs)
+    assert np.allclose(odometry(PROTOTYPE, alpha, alpha_dot, beta_dot), expected, atol=1e-12)

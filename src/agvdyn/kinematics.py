@@ -112,30 +112,76 @@ def wheel_headings(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
     return alpha[:, _SIDE] * geom.heading_sign
 
 
+@numba.njit(cache=True)
+def constraint_matrix_into(l, b, a, r, alpha_l, alpha_r, A):  # pragma: no cover - compiled
+    """A(alpha) ``(8, 9)`` of eq. (1)-(2) for one configuration, written into ``A``.
+
+    Row i (lateral) ``e_lat . (v + omega z x c_i)``; row 4+i (longitudinal)
+    ``e_long . (v + omega z x c_i) - s_i a (omega + theta_i_dot) - r beta_i_dot``.
+    """
+    A[:, :] = 0.0
+    for i in range(4):
+        left = i < 2
+        sigma = 1.0 if i % 2 == 0 else -1.0
+        side = 1.0 if left else -1.0
+        cx = l / 2 if i % 2 == 0 else -l / 2
+        cy = b / 2 if left else -b / 2
+        theta = sigma * (alpha_l if left else alpha_r)
+        c, s = np.cos(theta), np.sin(theta)
+        A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
+        A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = c, s, -c * cy + s * cx - side * a
+        A[4 + i, 3 if left else 4] = -side * a * sigma
+        A[4 + i, 5 + i] = -r
+
+
+@numba.njit(cache=True)
+def _constraint_matrices(l, b, a, r, alpha):  # pragma: no cover - compiled
+    A = np.empty((alpha.shape[0], 8, 9))
+    for j in range(alpha.shape[0]):
+        constraint_matrix_into(l, b, a, r, alpha[j, 0], alpha[j, 1], A[j])
+    return A
+
+
 def constraint_matrix(geom: Geometry, alpha) -> np.ndarray:
     """Constraint matrix A(alpha) ``(N, 8, 9)`` of eq. (1)-(2).
 
     Rows 0-3: lateral rolling constraints, rows 4-7: longitudinal ones, wheels fl, rl, fr, rr.
     """
-    alpha = as_alpha(alpha)
+    alpha = np.ascontiguousarray(as_alpha(alpha))
+    return _constraint_matrices(geom.l, geom.b, geom.a, geom.r, alpha)
+
+
+@numba.njit(cache=True)
+def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot):  # pragma: no cover - compiled
     n = alpha.shape[0]
-    theta = wheel_headings(geom, alpha)
-    c, s = np.cos(theta), np.sin(theta)
-    cx, cy = geom.steering_axes.T
-    side = geom.side_sign
-    A = np.zeros((n, 8, N_Q))
-    # lateral: e_lat . (v + omega z x c_i)
-    A[:, :4, 0] = -s
-    A[:, :4, 1] = c
-    A[:, :4, 2] = s * cy + c * cx
-    # longitudinal: e_long . (v + omega z x c_i) - s_i a (omega + theta_i_dot) - r beta_i_dot
-    A[:, 4:, 0] = c
-    A[:, 4:, 1] = s
-    A[:, 4:, 2] = -c * cy + s * cx - side * geom.a
-    wheel = np.arange(4)
-    A[:, 4 + wheel, 3 + _SIDE] = -side * geom.a * geom.heading_sign
-    A[:, 4 + wheel, 5 + wheel] = -geom.r
-    return A
+    out = np.empty((n, 3))
+    A = np.empty((8, 9))
+    M = np.empty((3, 3))
+    g = np.empty(3)
+    for j in range(n):
+        constraint_matrix_into(l, b, a, r, alpha[j, 0], alpha[j, 1], A)
+        M[:, :] = 0.0
+        g[:] = 0.0
+        for row in range(8):
+            rhs = -(A[row, 3] * alpha_dot[j, 0] + A[row, 4] * alpha_dot[j, 1])
+            for w in range(4):
+                rhs -= A[row, 5 + w] * beta_dot[j, w]
+            for p in range(3):
+                g[p] += A[row, p] * rhs
+                for q in range(3):
+                    M[p, q] += A[row, p] * A[row, q]
+        # 3 x 3 symmetric solve by cofactors (A_ch has full column rank for every alpha)
+        c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
+        c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
+        c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
+        c11 = M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]
+        c12 = M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1]
+        c22 = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+        det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
+        out[j, 0] = (c00 * g[0] + c01 * g[1] + c02 * g[2]) / det
+        out[j, 1] = (c01 * g[0] + c11 * g[1] + c12 * g[2]) / det
+        out[j, 2] = (c02 * g[0] + c12 * g[1] + c22 * g[2]) / det
+    return out
 
 
 def odometry(geom: Geometry, alpha, alpha_dot, beta_dot) -> np.ndarray:
@@ -143,15 +189,11 @@ def odometry(geom: Geometry, alpha, alpha_dot, beta_dot) -> np.ndarray:
 
     ``q_ch_dot = -A_ch^+ (A_alpha alpha_dot + A_beta beta_dot)`` (least squares over all 8 rows).
     """
-    alpha = as_alpha(alpha)
+    alpha = np.ascontiguousarray(as_alpha(alpha))
     n = alpha.shape[0]
-    alpha_dot = _rows(alpha_dot, n, 2, "alpha_dot")
-    beta_dot = _rows(beta_dot, n, 4, "beta_dot")
-    A = constraint_matrix(geom, alpha)
-    A_ch = A[:, :, :3]
-    rhs = -(np.einsum("nij,nj->ni", A[:, :, 3:5], alpha_dot) + np.einsum("nij,nj->ni", A[:, :, 5:], beta_dot))
-    normal = np.einsum("nki,nkj->nij", A_ch, A_ch)
-    return np.linalg.solve(normal, np.einsum("nki,nk->ni", A_ch, rhs)[..., None])[..., 0]
+    alpha_dot = np.ascontiguousarray(_rows(alpha_dot, n, 2, "alpha_dot"))
+    beta_dot = np.ascontiguousarray(_rows(beta_dot, n, 4, "beta_dot"))
+    return _odometry(geom.l, geom.b, geom.a, geom.r, alpha, alpha_dot, beta_dot)
 
 
 # --- ICR relation, eq. (6)-(8) ------------------------------------------------------------
