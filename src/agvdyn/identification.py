@@ -610,12 +610,12 @@ class Identification:
 
 
 def load_logs(logs: Any) -> list[Any]:
-    """Logs as :class:`agvdyn.io.Log` objects: paths are read (and checked), logs are passed through."""
-    from agvdyn.io import read_log
+    """Logs as :class:`agvdyn.io.Log` objects: paths are loaded (``agvdyn.io.load_log``, checked), logs passed through."""
+    from agvdyn.io import load_log
 
     if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha"):
         logs = [logs]
-    out = [read_log(x) if isinstance(x, (str, os.PathLike)) else x for x in logs]
+    out = [load_log(x) if isinstance(x, (str, os.PathLike)) else x for x in logs]
     if not out:
         raise ValueError("no logs given: expected at least one log")
     return out
