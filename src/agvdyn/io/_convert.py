@@ -71,11 +71,17 @@ def resample(
     return out
 
 
+#: Tolerance of segment range boundaries, s: the resolution of bag stamps (1 ns), so that a row
+#: at t = 12.999999999999998 on a computed time base belongs to a range starting at 13.0.
+BOUNDARY_TOLERANCE = 1e-9
+
+
 def segments_from_ranges(t: np.ndarray, ranges: tuple[SegmentRange, ...]) -> np.ndarray:
-    """Segment name per row from time ranges ``[start, end)``; None outside all ranges."""
+    """Segment name per row from time ranges ``[start, end)`` (boundaries within 1 ns); None outside."""
     names = np.full(len(t), None, dtype=object)
+    eps = BOUNDARY_TOLERANCE
     for r in ranges:
-        names[(t >= r.start) & (t < r.end)] = r.name
+        names[(t >= r.start - eps) & (t < r.end - eps)] = r.name
     return names
 
 
