@@ -188,10 +188,12 @@ def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, 
     N = admissible_basis(geom, mode, alpha, tolerance=tolerance)
     M = geom.i_G * np.swapaxes(N[:, 5:, :], 1, 2)  # N^T B  (n, m, 4)
     g = np.einsum("nim,ni->nm", N, f)
-    if mode is Mode.LATERAL:
+    if mode is Mode.LATERAL:  # N^T B has rank 2: consistent targets, least-squares right inverse
         g = _lateral_steering_targets(geom, g)
-    u = np.einsum("nij,nj->ni", np.linalg.pinv(M, rcond=1e-10), g)
-    return u
+        return np.einsum("nij,nj->ni", np.linalg.pinv(M, rcond=1e-10), g)
+    # full row rank: minimum-norm solution u = M^T (M M^T)^-1 g
+    y = np.linalg.solve(np.einsum("nik,njk->nij", M, M), g[..., None])[..., 0]
+    return np.einsum("nik,ni->nk", M, y)
 
 
 def _lateral_steering_targets(geom: Geometry, g: np.ndarray) -> np.ndarray:
