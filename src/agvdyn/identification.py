@@ -30,7 +30,7 @@ import pandas as pd
 import scipy.linalg
 
 from agvdyn.dynamics import N_P, projected_input, projected_regressor
-from agvdyn.kinematics import MODE_TOLERANCE, Mode, detect_mode, kinematic_model, nominal_steering, odometry
+from agvdyn.kinematics import MODE_TOLERANCE, Mode, detect_mode, kinematic_model, odometry
 from agvdyn.platform import (
     EPSILON,
     PARAMETER_NAMES,
@@ -283,22 +283,14 @@ def _detected_labels(geometry: Geometry, kin: "_Kinematics", settings: Identific
 
 def _chassis_velocity(geometry: Geometry, mode: Mode, alpha: np.ndarray, alpha_dot: np.ndarray,
                       beta_dot: np.ndarray) -> np.ndarray:
-    """Chassis velocities (v_x, v_y, omega) of a run by odometry, eq. (3).
+    """Chassis velocities (v_x, v_y, omega) of a run by odometry, eq. (3), at the filtered angles.
 
-    Mode 1: the chassis rows of H_1 are zero, so the chassis velocities do not enter eq. (19);
-    zeros are returned. Modes 3, 4 and straight: the core evaluates H_k at the mode's nominal
-    steering angles, and odometry is evaluated there too (its linear map, once). Mode 2: at the
-    measured angles.
+    Mode 1: the chassis rows of H_1 are zero, so the chassis velocities do not enter eq. (19)
+    (neither directly nor through the Coriolis terms of eq. 16); zeros are returned.
     """
-    n = alpha.shape[0]
     if mode is Mode.PARKING:
-        return np.zeros((n, 3))
-    nominal = nominal_steering(geometry, mode)
-    if nominal is None:
-        return odometry(geometry, alpha, alpha_dot, beta_dot)
-    unit = np.eye(6)
-    linear_map = odometry(geometry, np.broadcast_to(nominal, (6, 2)), unit[:, :2], unit[:, 2:])  # (6, 3)
-    return np.concatenate([alpha_dot, beta_dot], axis=1) @ linear_map
+        return np.zeros((alpha.shape[0], 3))
+    return odometry(geometry, alpha, alpha_dot, beta_dot)
 
 
 @dataclass(frozen=True)
@@ -609,13 +601,15 @@ class Identification:
         }
 
 
-def load_logs(logs: Any) -> list[Any]:
-    """Logs as :class:`agvdyn.io.Log` objects: paths are loaded (``agvdyn.io.load_log``, checked), logs passed through."""
+def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.PathLike | None = None) -> list[Any]:
+    """Logs as :class:`agvdyn.io.Log` objects: paths are loaded and checked with
+    ``agvdyn.io.load_log(path, mapping, platform)`` (mapping: for tables and bags not in our
+    schema), Log objects are passed through."""
     from agvdyn.io import load_log
 
     if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha"):
         logs = [logs]
-    out = [load_log(x) if isinstance(x, (str, os.PathLike)) else x for x in logs]
+    out = [load_log(x, mapping, platform) if isinstance(x, (str, os.PathLike)) else x for x in logs]
     if not out:
         raise ValueError("no logs given: expected at least one log")
     return out
