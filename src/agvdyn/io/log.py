@@ -151,7 +151,8 @@ def check_frame(
                 f"{source}: column '{col}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): steering angle "
                 f"{data[col][row]!r} rad is beyond the mechanical range [-pi/2, pi/2] (expected radians)"
             )
-    out = pd.DataFrame(data, index=pd.RangeIndex(n))
+    # One float64 block (no pandas consolidation pass): fast to build and to slice.
+    out = pd.DataFrame(np.column_stack([data[c] for c in LOG_COLUMNS]), columns=list(LOG_COLUMNS))
     if SEGMENT_COLUMN in frame.columns:
         out[SEGMENT_COLUMN] = _segment_column(frame[SEGMENT_COLUMN], source, t, csv_rows)
     for col in frame.columns:
@@ -178,6 +179,22 @@ def _numeric_column(series: pd.Series, source: str, col: str, csv_rows: bool) ->
 
 
 def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: bool) -> pd.Categorical:
+    if isinstance(series.dtype, pd.CategoricalDtype):
+        # Check the categories only (Parquet logs written by write_log): O(categories), not O(rows).
+        cat = series.array
+        names = pd.Series(cat.categories.astype("string")).str.strip()
+        names = names.mask(names == "", pd.NA).to_numpy(dtype=object, na_value=None)
+        codes = np.asarray(cat.codes)
+        lookup = np.array([-1 if v is None else (SEGMENTS.index(v) if v in SEGMENTS else -2) for v in names] + [-1])
+        new_codes = lookup[codes]  # code -1 (missing) picks the trailing -1
+        unknown = new_codes == -2
+        if unknown.any():
+            row = int(np.argmax(unknown))
+            raise LogError(
+                f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): "
+                f"unknown segment name {names[codes[row]]!r}: expected one of {list(SEGMENTS)} or empty"
+            )
+        return pd.Categorical.from_codes(new_codes, categories=list(SEGMENTS))
     text = series.astype("string").str.strip()
     # An empty field means "no segment" (for example a transition between phases).
     text = text.mask(text == "", pd.NA)
