@@ -61,3 +61,59 @@ def test_acceptance_identification_through_a_ros2_bag(tmp_path, storage):
     truth = PAPER_PARAMETERS.to_vector()
     free = [i for i, n in enumerate(PARAMETER_NAMES) if n != "B_w"]
     assert np.abs(p0[free] / truth[free] - 1).max() < 0.05
+
+
+def test_acceptance_irregular_split_bag_gives_the_same_parameters(tmp_path):
+    """A harder round trip: the bag holds the model signals at irregular stamps (+-0.4 ms jitter,
+    taken exactly from a 0.2 ms model grid), steering and wheel joints in separate messages with
+    independent stamps. Resampled at 500 Hz by linear interpolation and identified, the
+    parameters agree with those of the regular 500 Hz log within 0.1 % (noise-free data, so the
+    difference is the resampling alone; measured: at most 5e-4, on C_l)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    js, header, stamp = (ts.types[k] for k in ("sensor_msgs/msg/JointState", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    fine, _ = identification_frame(DURATIONS, dt=2e-4, align=1.0)
+    regular = Log.from_frame(fine.iloc[::10].reset_index(drop=True))
+    mapping = read_mapping(EXAMPLE)
+    joints = {s.quantity: s.source for s in mapping.signals}
+    steer_names = [joints["alpha_l"], joints["heading_rl"], joints["alpha_r"], joints["heading_rr"]]
+    wheel_names = [joints[f"beta_{w}"] for w in ("fl", "rl", "fr", "rr")]
+    rng = np.random.default_rng(0)
+    n = len(fine)
+
+    def jittered(offset: int) -> np.ndarray:  # every 10th fine sample, +-2 fine samples
+        k = np.arange(offset, n, 10)
+        return np.unique(np.clip(k + rng.integers(-2, 3, k.size), 0, n - 1))
+
+    t = fine["t"].to_numpy()
+    alpha = fine[["alpha_l", "alpha_r"]].to_numpy()
+    beta = np.ascontiguousarray(fine[["beta_fl", "beta_rl", "beta_fr", "beta_rr"]].to_numpy())
+    wheel_torque = np.ascontiguousarray(fine[["m_fl", "m_rl", "m_fr", "m_rr"]].to_numpy() * PROTOTYPE.i_G)
+    start = 1_700_000_000_000_000_000
+    events = [(start + int(round(t[i] * 1e9)), steer_names, np.array([alpha[i, 0], -alpha[i, 0], alpha[i, 1], -alpha[i, 1]]),
+               np.full(4, np.nan)) for i in jittered(0)]
+    events += [(start + int(round(t[i] * 1e9)), wheel_names, beta[i], wheel_torque[i]) for i in jittered(3)]
+    events.sort(key=lambda e: e[0])
+    with Writer(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ts)
+        for ns, names, pos, eff in events:
+            msg = js(header=header(stamp=stamp(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""), name=names,
+                     position=pos, velocity=np.array([], dtype=float), effort=eff)
+            writer.write(conn, ns + 100_000, ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+
+    # Log time 0 of the converted log is the first common stamp: shift the segment ranges by it.
+    first = max(min(e[0] for e in events if e[1] is names) for names in (steer_names, wheel_names))
+    shift = (first - start) / 1e9
+    data = mapping.to_dict()
+    data["segments"] = [{"name": r.name, "start": r.t_start - shift, "end": r.t_end + 1e-3 - shift}
+                        for r in regular.segment_runs()]
+    back = load_log(tmp_path / "bag", mapping_from_dict(data), PROTOTYPE)
+    assert back.sidecar["conversion"]["t0_ns"] == first
+    assert back.sidecar["conversion"]["rate"] == pytest.approx(500.0)
+
+    p0 = identify(regular, PROTOTYPE).parameters.to_vector()
+    p1 = identify(back, PROTOTYPE).parameters.to_vector()
+    rel = np.abs(p1 / p0 - 1)
+    assert rel.max() < 1e-3, dict(zip(PARAMETER_NAMES, rel))

@@ -200,3 +200,20 @@ def test_from_frame_accepts_any_valid_uniform_log(n, dt, angles):
     log = Log.from_frame(pd.DataFrame(data))
     assert log.sample_time == pytest.approx(dt)
     assert log.duration == pytest.approx((n - 1) * dt)
+
+
+def test_unknown_segment_in_a_categorical_parquet_column(tmp_path):
+    frame = make_frame()
+    frame.loc[150, "segment"] = "sidewards"
+    frame["segment"] = frame["segment"].astype("category")
+    frame.to_parquet(tmp_path / "bad.parquet")
+    with pytest.raises(LogError, match=r"bad\.parquet: column 'segment', row 150 .*unknown segment name 'sidewards'"):
+        read_log(tmp_path / "bad.parquet")
+    frame.loc[150, "segment"] = None
+    log = read_log_from(frame, tmp_path)
+    assert log.segments[150] == "" and log.segments[149] == "rotation"
+
+
+def read_log_from(frame, tmp_path):
+    frame.to_parquet(tmp_path / "ok.parquet")
+    return read_log(tmp_path / "ok.parquet")
