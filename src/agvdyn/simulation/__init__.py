@@ -1,1 +1,322 @@
-"""Closed-loop vehicle simulation (see agvdyn.simulation.simulate)."""
+"""Closed-loop simulation of the vehicle: plant with tyre slip, drive controller, sensors, logs.
+
+Entry point :func:`simulate` returns a :class:`SimulationResult` (true states, commanded and
+measured signals, tracking errors, the log in the PLATFORM.md schema); :func:`feedforward_table`
+gives the planned trajectory with its feed-forward motor torques of eq. (21).
+
+Example
+-------
+>>> from agvdyn.simulation import simulate
+>>> result = simulate("identification", seed=1)          # doctest: +SKIP
+>>> result.write("identification.parquet")               # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from agvdyn.kinematics import odometry
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
+from agvdyn.simulation._kernels import run_chunk
+from agvdyn.simulation.controller import STATE_SIZE, ControllerSettings
+from agvdyn.simulation.plant import PlantSettings, plant_constants, run_open_loop
+from agvdyn.simulation.sensors import SensorSettings, draw_noise
+from agvdyn.trajectories import (
+    Limits,
+    Trajectory,
+    TrajectoryError,
+    check_limits,
+    experiment as build_experiment,
+    floor_space,
+    pose_from_velocities,
+)
+
+__all__ = [
+    "ControllerSettings", "PlantSettings", "SensorSettings", "SimulationSettings", "SimulationResult",
+    "simulate", "feedforward_table", "run_open_loop", "plant_constants",
+]
+
+#: Samples simulated between two progress reports.
+CHUNK = 5000
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Everything about a simulation run besides platform, parameters and seed.
+
+    ``check_limits``: refuse (LimitError) a trajectory whose planned velocities, accelerations
+    or feed-forward torques break ``limits`` before simulating it.
+    """
+
+    plant: PlantSettings = field(default_factory=PlantSettings)
+    controller: ControllerSettings = field(default_factory=ControllerSettings)
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    limits: Limits = field(default_factory=Limits)
+    check_limits: bool = True
+    sample_time: float = SAMPLE_TIME
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sample_time) and self.sample_time > 0):
+            raise ValueError(f"sample_time={self.sample_time!r}: expected > 0 s")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "plant": self.plant.to_dict(), "controller": self.controller.to_dict(),
+            "sensors": self.sensors.to_dict(), "limits": dict(self.limits.__dict__),
+            "check_limits": self.check_limits, "sample_time": self.sample_time,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Outcome of :func:`simulate`; arrays have the sample axis first (N rows at ``t``).
+
+    True plant: ``position`` (N, 9) = (X, Y, gamma, alpha_l, alpha_r, beta_fl, beta_rl, beta_fr, beta_rr),
+    ``velocity`` (N, 9) (body-frame chassis velocities, PLATFORM.md order). Plan: ``q_dot_d``,
+    ``pose_d`` (N, 3), ``beta_d`` (N, 4), ``feedforward`` (N, 4). Sensors: ``alpha_measured`` (N, 2),
+    ``beta_measured`` (N, 4), ``torque_measured`` (N, 4). Drive: ``torque_command`` (N, 4) and
+    ``torque_applied`` (N, 4) after the torque limit. Energy: ``energy`` (N,) kinetic energy,
+    ``work`` (N, 3) cumulative (motor, dissipated, stops) work.
+    """
+
+    trajectory: Trajectory
+    geometry: Geometry
+    plant_params: Parameters
+    controller_params: Parameters
+    settings: SimulationSettings
+    seed: int
+    position: np.ndarray
+    velocity: np.ndarray
+    q_dot_d: np.ndarray
+    beta_d: np.ndarray
+    feedforward: np.ndarray
+    alpha_measured: np.ndarray
+    beta_measured: np.ndarray
+    torque_command: np.ndarray
+    torque_applied: np.ndarray
+    torque_measured: np.ndarray
+    energy: np.ndarray
+    work: np.ndarray
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.trajectory.t
+
+    @property
+    def segment(self) -> np.ndarray:
+        return self.trajectory.segment
+
+    @property
+    def experiment(self) -> str:
+        return self.trajectory.name
+
+    @cached_property
+    def pose_d(self) -> np.ndarray:
+        """Planned pose (N, 3) in the world frame of the start."""
+        return pose_from_velocities(self.q_dot_d[:, :3], self.settings.sample_time)
+
+    @cached_property
+    def odometry_pose(self) -> np.ndarray:
+        """Pose (N, 3) by odometry, eq. (3), from the measured angles (central differences), as the vehicle sees it."""
+        Ts = self.settings.sample_time
+        a_dot = np.gradient(self.alpha_measured, Ts, axis=0)
+        b_dot = np.gradient(self.beta_measured, Ts, axis=0)
+        twist = odometry(self.geometry, self.alpha_measured, a_dot, b_dot)
+        return pose_from_velocities(twist, Ts)
+
+    def log_frame(self) -> pd.DataFrame:
+        """The log in the PLATFORM.md schema: t, alpha_*, beta_* (wheel side), m_* (measured motor torques), segment."""
+        data: dict[str, Any] = {"t": self.t, "alpha_l": self.alpha_measured[:, 0], "alpha_r": self.alpha_measured[:, 1]}
+        for i, w in enumerate(WHEELS):
+            data[f"beta_{w}"] = self.beta_measured[:, i]
+        for i, w in enumerate(WHEELS):
+            data[f"m_{w}"] = self.torque_measured[:, i]
+        data["segment"] = pd.Categorical(self.segment.astype(str))
+        return pd.DataFrame(data)
+
+    def truth_frame(self) -> pd.DataFrame:
+        """True plant states, plan and drive signals per sample (for plots and checks)."""
+        names = ("X", "Y", "gamma", "alpha_l", "alpha_r", *(f"beta_{w}" for w in WHEELS))
+        vnames = ("v_x", "v_y", "omega", "alpha_l_dot", "alpha_r_dot", *(f"beta_{w}_dot" for w in WHEELS))
+        data: dict[str, Any] = {"t": self.t, "segment": self.segment.astype(str)}
+        data.update({f"true_{n}": self.position[:, i] for i, n in enumerate(names)})
+        data.update({f"true_{n}": self.velocity[:, i] for i, n in enumerate(vnames)})
+        data.update({f"plan_{n}": self.q_dot_d[:, i] for i, n in enumerate(vnames)})
+        data.update({f"plan_{n}": self.pose_d[:, i] for i, n in enumerate(("X", "Y", "gamma"))})
+        data.update({f"plan_alpha_{s}": self.trajectory.alpha[:, i] for i, s in enumerate("lr")})
+        data.update({f"odometry_{n}": self.odometry_pose[:, i] for i, n in enumerate(("X", "Y", "gamma"))})
+        for key in ("feedforward", "torque_command", "torque_applied"):
+            data.update({f"{key}_{w}": getattr(self, key)[:, i] for i, w in enumerate(WHEELS)})
+        return pd.DataFrame(data)
+
+    def tracking(self) -> pd.DataFrame:
+        """Tracking errors and odometry drift per segment (one row per segment, in time order).
+
+        steering_max: max |alpha - alpha_d| (rad); wheel_speed_rms: RMS of beta_dot - beta_dot_d
+        (rad/s); speed_rms: RMS of |(v_x, v_y) - planned| (m/s); yaw_rate_rms (rad/s); at the segment
+        end: position_error / heading_error of the true pose against the plan (m, rad, accumulated
+        from the start of the run) and odometry_drift / odometry_heading_drift of the odometry
+        pose against the true pose; saturated: share of samples with a torque at the limit.
+        """
+        rows = []
+        pose = self.position[:, :3]
+        for name, sl in self.trajectory.segment_slices():
+            end = sl.stop - 1
+            dv = self.velocity[sl] - self.q_dot_d[sl]
+            rows.append({
+                "segment": name,
+                "t_start": float(self.t[sl.start]),
+                "t_end": float(self.t[end]),
+                "steering_max": float(np.abs(self.position[sl, 3:5] - self.trajectory.alpha[sl]).max()),
+                "wheel_speed_rms": float(np.sqrt(np.mean(dv[:, 5:] ** 2))),
+                "speed_rms": float(np.sqrt(np.mean(dv[:, 0] ** 2 + dv[:, 1] ** 2))),
+                "yaw_rate_rms": float(np.sqrt(np.mean(dv[:, 2] ** 2))),
+                "position_error": float(np.hypot(*(pose[end, :2] - self.pose_d[end, :2]))),
+                "heading_error": float(abs(pose[end, 2] - self.pose_d[end, 2])),
+                "odometry_drift": float(np.hypot(*(self.odometry_pose[end, :2] - pose[end, :2]))),
+                "odometry_heading_drift": float(abs(self.odometry_pose[end, 2] - pose[end, 2])),
+                "saturated": float(np.mean(np.any(self.torque_applied[sl] != self.torque_command[sl], axis=1))),
+            })
+        return pd.DataFrame(rows)
+
+    def sidecar(self) -> dict[str, Any]:
+        """YAML sidecar of the log: platform, true parameters (eq. 18 order), seed, settings, summary."""
+        fs = floor_space(self.trajectory)
+        return {
+            "source": "agvdyn.simulation",
+            "experiment": self.experiment,
+            "platform": self.geometry.to_dict(),
+            "true_parameters": self.plant_params.to_dict(),
+            "controller_parameters": self.controller_params.to_dict(),
+            "seed": int(self.seed),
+            "settings": self.settings.to_dict(),
+            "floor_space": {"length": fs.length, "width": fs.width},
+            "tracking": self.tracking().to_dict(orient="records"),
+        }
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the log (Parquet by default, CSV by suffix) and its YAML sidecar atomically."""
+        from agvdyn.io import write_log
+
+        return write_log(path, self.log_frame(), self.sidecar())
+
+
+def _trajectory(experiment: str | os.PathLike | Trajectory, geom: Geometry, dt: float) -> Trajectory:
+    if isinstance(experiment, Trajectory):
+        if experiment.geometry != geom:
+            raise ValueError(f"trajectory planned for platform {experiment.geometry} but simulated on {geom}")
+        if abs(experiment.sample_time - dt) > 1e-12:
+            raise ValueError(f"trajectory sampled at {experiment.sample_time} s, expected {dt} s")
+        return experiment
+    return build_experiment(str(experiment), geom, dt=dt)
+
+
+def simulate(
+    experiment: str | os.PathLike | Trajectory,
+    *,
+    platform: Geometry = PROTOTYPE,
+    plant_params: Parameters = PAPER_PARAMETERS,
+    controller_params: Parameters | None = None,
+    settings: SimulationSettings = SimulationSettings(),
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> SimulationResult:
+    """Simulate an experiment in closed loop and record what the vehicle's sensors see.
+
+    Parameters
+    ----------
+    experiment : ``"identification"``, ``"lane-change"``, ``"lateral"``, a trajectory file
+        (.csv/.yaml, see :func:`agvdyn.trajectories.read_trajectory`) or a :class:`Trajectory`.
+    platform : geometry of plant and controller.
+    plant_params : the true parameters of the simulated vehicle (eq. 18 order).
+    controller_params : the controller's estimate for the feed-forward of eq. (21); default: the true ones.
+    settings : plant, controller, sensor and limit settings.
+    seed : seed of ``numpy.random.default_rng`` for all sensor noise; equal seeds give equal logs.
+    progress : called as ``progress(samples_done, samples_total)`` between chunks.
+
+    Raises
+    ------
+    LimitError : the planned trajectory breaks a limit (with ``settings.check_limits``).
+    """
+    Ts = settings.sample_time
+    traj = _trajectory(experiment, platform, Ts)
+    ctrl_params = plant_params if controller_params is None else controller_params
+    if settings.check_limits:
+        limits = settings.limits
+        if settings.plant.torque_limit is not None and settings.plant.torque_limit != limits.motor_torque:
+            from dataclasses import replace
+            limits = replace(limits, motor_torque=settings.plant.torque_limit)
+        check_limits(traj, ctrl_params, limits)
+    q_dot_d, _ = traj.joint_motion()
+    u_ff = traj.feedforward(ctrl_params)
+    beta_d = traj.wheel_angles(q_dot_d)
+    n = traj.n_samples
+    rng = np.random.default_rng(seed)
+    noise = draw_noise(n, settings.sensors, rng)
+    c = plant_constants(platform, plant_params, settings.plant)
+    g = settings.controller.gains(platform)
+    wheel_res = 2 * math.pi / (settings.sensors.encoder_counts * platform.i_G)
+    steer_res = 2 * math.pi / settings.sensors.steering_counts
+    pos = np.zeros(9)
+    pos[3:5] = traj.alpha[0]
+    vel = np.zeros(9)
+    cstate = np.zeros(STATE_SIZE)
+    work = np.zeros(3)
+    out = {k: np.zeros((n, w)) for k, w in (("pos", 9), ("vel", 9), ("alpha", 2), ("beta", 4), ("cmd", 4),
+                                            ("app", 4), ("meas", 4), ("work", 3))}
+    energy = np.zeros(n)
+    alpha_d = np.ascontiguousarray(traj.alpha)
+    mode_d = np.ascontiguousarray(traj.mode, dtype=np.int64)
+    alpha_dot_d = np.ascontiguousarray(q_dot_d[:, 3:5])
+    beta_dot_d = np.ascontiguousarray(q_dot_d[:, 5:])
+    for k0 in range(0, n, CHUNK):
+        k1 = min(n, k0 + CHUNK)
+        run_chunk(k0, k1, c, g, Ts, settings.plant.substeps, wheel_res, steer_res,
+                  u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, noise.steering, noise.torque, noise.torque_offset,
+                  pos, vel, cstate, work,
+                  out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
+                  energy, out["work"])
+        if not np.all(np.isfinite(pos)) or not np.all(np.isfinite(vel)):
+            raise FloatingPointError(f"simulation of {traj.name!r} diverged at t = {k1 * Ts:.3f} s: "
+                                     "reduce the plant step (substeps) or the gains")
+        if progress is not None:
+            progress(k1, n)
+    return SimulationResult(
+        traj, platform, plant_params, ctrl_params, settings, seed,
+        out["pos"], out["vel"], q_dot_d, beta_d, u_ff, out["alpha"], out["beta"],
+        out["cmd"], out["app"], out["meas"], energy, out["work"],
+    )
+
+
+def feedforward_table(experiment: str | os.PathLike | Trajectory, params: Parameters = PAPER_PARAMETERS,
+                      platform: Geometry = PROTOTYPE, *, sample_time: float = SAMPLE_TIME) -> pd.DataFrame:
+    """Planned trajectory with its feed-forward motor torques of eq. (21), one row per sample.
+
+    Columns: t, segment, mode (label), alpha_l, alpha_r, the planned q_dot (v_x, v_y, omega,
+    alpha_l_dot, alpha_r_dot, beta_*_dot), planned wheel angles beta_*, and m_fl..m_rr (N m, motor side).
+    """
+    traj = _trajectory(experiment, platform, sample_time)
+    q_dot, _ = traj.joint_motion()
+    u = traj.feedforward(params)
+    beta = traj.wheel_angles(q_dot)
+    from agvdyn.kinematics import Mode
+
+    labels = np.array([Mode(int(m)).label for m in traj.mode])
+    data: dict[str, Any] = {"t": traj.t, "segment": traj.segment.astype(str), "mode": labels,
+                            "alpha_l": traj.alpha[:, 0], "alpha_r": traj.alpha[:, 1]}
+    vnames = ("v_x", "v_y", "omega", "alpha_l_dot", "alpha_r_dot", *(f"beta_{w}_dot" for w in WHEELS))
+    data.update({n: q_dot[:, i] for i, n in enumerate(vnames)})
+    data.update({f"beta_{w}": beta[:, i] for i, w in enumerate(WHEELS)})
+    data.update({f"m_{w}": u[:, i] for i, w in enumerate(WHEELS)})
+    return pd.DataFrame(data)
+
+
+__all__ += ["TrajectoryError"]

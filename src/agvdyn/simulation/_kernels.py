@@ -1,0 +1,403 @@
+"""Compiled kernels of the simulation (numba): plant step, sensors, controller step, closed loop.
+
+They live in one module on purpose: numba's on-disk cache (``cache=True``) is invalidated only
+when the file of the cached function changes, not when a function it calls in another file
+does. Keeping every kernel in this file means an edit anywhere recompiles everything.
+The physics and the design choices are documented in plant.py, sensors.py and controller.py.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# Indices of the constant vector handed to the compiled code.
+(_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
+ _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _NCONST) = range(32)
+
+
+
+# --- plant (see plant.py) ---
+
+@njit(cache=True)
+def _unit_geometry(c, alpha, i):
+    """Heading, side sign, heading sign, steering axis and unit position terms of wheel i."""
+    side = 0 if i < 2 else 1
+    s = 1.0 if i < 2 else -1.0
+    h = 1.0 if i % 2 == 0 else -1.0
+    cx = c[_L] / 2 * h
+    cy = c[_B] / 2 * s
+    th = h * alpha[side]
+    return side, s, h, cx, cy, th
+
+
+@njit(cache=True)
+def _mass_matrix(c, alpha, M):
+    """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities)."""
+    M[:, :] = 0.0
+    M[0, 0] = c[_MB]
+    M[1, 1] = c[_MB]
+    M[2, 2] = c[_CB]
+    m_u, e = c[_MU_MASS], c[_EU]
+    J = np.zeros(9)
+    for i in range(4):
+        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
+        ct, st = math.cos(th), math.sin(th)
+        px = cx - s * e * st
+        py = cy + s * e * ct
+        dpx = -s * e * h * ct  # d p / d alpha_side
+        dpy = -s * e * h * st
+        # translational Jacobian rows (x and y) restricted to the nonzero columns 0, 1, 2, 3 + side
+        jx = (1.0, 0.0, -py, dpx)
+        jy = (0.0, 1.0, px, dpy)
+        idx = (0, 1, 2, 3 + side)
+        for p in range(4):
+            for q in range(4):
+                M[idx[p], idx[q]] += m_u * (jx[p] * jx[q] + jy[p] * jy[q])
+        Ju = c[_JUL] if side == 0 else c[_JUR]
+        M[2, 2] += Ju
+        M[3 + side, 3 + side] += Ju
+        M[2, 3 + side] += Ju * h
+        M[3 + side, 2] += Ju * h
+    for i in range(4):
+        M[5 + i, 5 + i] = c[_BW]
+    return J
+
+
+@njit(cache=True)
+def _bias(c, alpha, v, out):
+    """Coriolis and centrifugal forces h(alpha, v) (9,) of the plant in body-frame velocities."""
+    out[:] = 0.0
+    w = v[2]
+    out[0] = -c[_MB] * w * v[1]
+    out[1] = c[_MB] * w * v[0]
+    m_u, e = c[_MU_MASS], c[_EU]
+    if m_u == 0.0:
+        return
+    for i in range(4):
+        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
+        ct, st = math.cos(th), math.sin(th)
+        px = cx - s * e * st
+        py = cy + s * e * ct
+        dpx = -s * e * h * ct
+        dpy = -s * e * h * st
+        ad = v[3 + side]
+        # velocity of the unit's centre of mass (body components)
+        wx = v[0] - w * py + dpx * ad
+        wy = v[1] + w * px + dpy * ad
+        # J_dot v = omega z x p_dot + d2p/dalpha2 alpha_dot^2 ; d2p/dalpha2 = -s e (-sin, cos)
+        pdx, pdy = dpx * ad, dpy * ad
+        ax = -w * pdy + (s * e * st) * ad * ad - w * wy
+        ay = w * pdx + (-s * e * ct) * ad * ad + w * wx
+        out[0] += m_u * ax
+        out[1] += m_u * ay
+        out[2] += m_u * (-py * ax + px * ay)
+        out[3 + side] += m_u * (dpx * ax + dpy * ay)
+
+
+@njit(cache=True)
+def _constraint_matrix(c, alpha, A):
+    """A(alpha) (8, 9) of eq. (1)-(2): rows 0-3 lateral, 4-7 longitudinal slip of fl, rl, fr, rr."""
+    A[:, :] = 0.0
+    a, r = c[_A], c[_R]
+    for i in range(4):
+        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
+        ct, st = math.cos(th), math.sin(th)
+        A[i, 0] = -st
+        A[i, 1] = ct
+        A[i, 2] = st * cy + ct * cx
+        A[4 + i, 0] = ct
+        A[4 + i, 1] = st
+        A[4 + i, 2] = -ct * cy + st * cx - s * a
+        A[4 + i, 3 + side] = -s * a * h
+        A[4 + i, 5 + i] = -r
+
+
+@njit(cache=True)
+def _coulomb_secant(c, vel, d_c):
+    """Secant coefficient tau / v of the Coulomb friction at velocity ``vel``."""
+    mode = c[_COUL]
+    av = abs(vel)
+    if mode == 2.0:
+        return 0.0
+    if mode == 1.0:
+        x = av / c[_EPS]
+        return d_c / c[_EPS] if x < 1e-8 else d_c * math.tanh(x) / av
+    level = d_c * (1.0 + (c[_RATIO] - 1.0) * math.exp(-(av / c[_VSTRIB]) ** 2))
+    return level / max(av, c[_VSTICK])
+
+
+@njit(cache=True)
+def _cholesky_solve(K, rhs, n):
+    """Solve K x = rhs in place (K symmetric positive definite, overwritten); returns x in rhs."""
+    for j in range(n):
+        d = K[j, j]
+        for k in range(j):
+            d -= K[j, k] * K[j, k]
+        d = math.sqrt(d)
+        K[j, j] = d
+        for i in range(j + 1, n):
+            t = K[i, j]
+            for k in range(j):
+                t -= K[i, k] * K[j, k]
+            K[i, j] = t / d
+    for i in range(n):
+        t = rhs[i]
+        for k in range(i):
+            t -= K[i, k] * rhs[k]
+        rhs[i] = t / K[i, i]
+    for i in range(n - 1, -1, -1):
+        t = rhs[i]
+        for k in range(i + 1, n):
+            t -= K[k, i] * rhs[k]
+        rhs[i] = t / K[i, i]
+
+
+@njit(cache=True)
+def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
+    """Advance the plant by one linearly-implicit Euler step of length dt (in place).
+
+    ``torque``: motor torques (4,) after the drive's limit; ``work`` (3,) accumulates
+    (motor work, dissipated work, stop work) over the step, evaluated at the new velocities.
+    """
+    alpha = pos[3:5]
+    _mass_matrix(c, alpha, M)
+    _bias(c, alpha, vel, h)
+    _constraint_matrix(c, alpha, A)
+    # slip velocities and tyre secant coefficients (lagged)
+    for j in range(8):
+        t = 0.0
+        for q in range(9):
+            t += A[j, q] * vel[q]
+        slip[j] = t
+    mufz = c[_MU] * c[_FZ]
+    for i in range(4):
+        v_contact = slip[4 + i] + c[_R] * vel[5 + i]
+        V = max(abs(c[_R] * vel[5 + i]), math.sqrt(v_contact**2 + slip[i] ** 2), c[_V0])
+        d_lat, d_long = c[_CLAT] / V, c[_CLONG] / V
+        sig = math.sqrt((d_lat * slip[i]) ** 2 + (d_long * slip[4 + i]) ** 2) / mufz
+        g = 1.0 if sig < 1e-9 else math.tanh(sig) / sig
+        dvec[i] = d_lat * g
+        dvec[4 + i] = d_long * g
+    # K = M + dt (A^T D A + joint damping)
+    for p in range(9):
+        for q in range(9):
+            t = 0.0
+            for j in range(8):
+                t += A[j, p] * dvec[j] * A[j, q]
+            K[p, q] = M[p, q] + dt * t
+    joint_d = np.zeros(9)
+    joint_d[3] = c[_DVL] + _coulomb_secant(c, vel[3], c[_DCL])
+    joint_d[4] = c[_DVR] + _coulomb_secant(c, vel[4], c[_DCR])
+    for i in range(4):
+        joint_d[5 + i] = c[_DVW] + _coulomb_secant(c, vel[5 + i], c[_DCW])
+    for q in range(3, 9):
+        K[q, q] += dt * joint_d[q]
+    # right-hand side M v - dt h + dt B u (+ stops)
+    for p in range(9):
+        t = 0.0
+        for q in range(9):
+            t += M[p, q] * vel[q]
+        rhs[p] = t - dt * h[p]
+    for i in range(4):
+        rhs[5 + i] += dt * c[_IG] * torque[i]
+    stop_k = np.zeros(2)
+    stop_pen = np.zeros(2)
+    for j in range(2):
+        lim = 0.5 * math.pi
+        pen = alpha[j] - lim if alpha[j] > lim else (alpha[j] + lim if alpha[j] < -lim else 0.0)
+        if pen != 0.0:
+            stop_k[j] = 1.0
+            stop_pen[j] = pen
+            K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
+            rhs[3 + j] -= dt * c[_KSTOP] * pen
+    _cholesky_solve(K, rhs, 9)
+    # energy accounts at the new velocities
+    p_motor = 0.0
+    for i in range(4):
+        p_motor += c[_IG] * torque[i] * rhs[5 + i]
+    p_diss = 0.0
+    for j in range(8):
+        t = 0.0
+        for q in range(9):
+            t += A[j, q] * rhs[q]
+        p_diss += dvec[j] * t * t
+    for q in range(3, 9):
+        p_diss += joint_d[q] * rhs[q] * rhs[q]
+    p_stop = 0.0
+    for j in range(2):
+        if stop_k[j] != 0.0:
+            p_stop -= (c[_KSTOP] * (stop_pen[j] + dt * rhs[3 + j]) + c[_DSTOP] * rhs[3 + j]) * rhs[3 + j]
+    work[0] += dt * p_motor
+    work[1] += dt * p_diss
+    work[2] += dt * p_stop
+    # positions (symplectic: with the new velocities)
+    g0 = pos[2]
+    cg, sg = math.cos(g0 + 0.5 * dt * rhs[2]), math.sin(g0 + 0.5 * dt * rhs[2])
+    pos[0] += dt * (cg * rhs[0] - sg * rhs[1])
+    pos[1] += dt * (sg * rhs[0] + cg * rhs[1])
+    for q in range(2, 9):
+        pos[q] += dt * rhs[q]
+    for q in range(9):
+        vel[q] = rhs[q]
+
+
+@njit(cache=True)
+def kinetic_energy(c, pos, vel, M):
+    """Kinetic energy 0.5 v^T M(alpha) v of the plant, J."""
+    _mass_matrix(c, pos[3:5], M)
+    e = 0.0
+    for p in range(9):
+        for q in range(9):
+            e += vel[p] * M[p, q] * vel[q]
+    return 0.5 * e
+
+
+@njit(cache=True)
+def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
+    """Plant driven by given motor torques (N, 4), held over each sample.
+
+    Returns positions (N+1, 9), velocities (N+1, 9), energy (N+1,), cumulative work (N+1, 3).
+    """
+    n = torques.shape[0]
+    pos = pos0.copy()
+    vel = vel0.copy()
+    P = np.zeros((n + 1, 9))
+    V = np.zeros((n + 1, 9))
+    E = np.zeros(n + 1)
+    W = np.zeros((n + 1, 3))
+    M = np.zeros((9, 9))
+    A = np.zeros((8, 9))
+    K = np.zeros((9, 9))
+    h = np.zeros(9)
+    rhs = np.zeros(9)
+    slip = np.zeros(8)
+    dvec = np.zeros(8)
+    work = np.zeros(3)
+    dt = dt_sample / substeps
+    P[0] = pos
+    V[0] = vel
+    E[0] = kinetic_energy(c, pos, vel, M)
+    tq = np.zeros(4)
+    for k in range(n):
+        for i in range(4):
+            tq[i] = min(max(torques[k, i], -c[_TLIM]), c[_TLIM])
+        for j in range(substeps):
+            plant_step(c, pos, vel, tq, dt, work, M, A, K, h, rhs, slip, dvec)
+        P[k + 1] = pos
+        V[k + 1] = vel
+        E[k + 1] = kinetic_energy(c, pos, vel, M)
+        W[k + 1] = work
+    return P, V, E, W
+
+
+# --- sensors (see sensors.py) ---
+
+@njit(cache=True)
+def quantize(x, resolution):
+    """Reading of an incremental/absolute encoder: x rounded down to whole counts of ``resolution``."""
+    return math.floor(x / resolution) * resolution
+
+
+@njit(cache=True)
+def read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m):
+    """Measured steering angles (2,) and wheel angles (4,) of the plant positions ``pos`` at sample k.
+
+    Steering angles are clipped to the calibrated range [-pi/2, pi/2] of the sensor (the stops).
+    """
+    lim = 0.5 * math.pi
+    for j in range(2):
+        a = quantize(pos[3 + j] + steer_noise[k, j] + 0.5 * steer_res, steer_res)
+        alpha_m[j] = min(max(a, -lim), lim)
+    for i in range(4):
+        beta_m[i] = quantize(pos[5 + i], wheel_res)
+
+
+# --- controller (see controller.py) ---
+
+@njit(cache=True)
+def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, state, u):
+    """Motor torque commands u (4,) at sample k from the measurements and the plan (in place)."""
+    if state[12] == 0.0:
+        for i in range(4):
+            state[i] = beta_m[i]
+        for j in range(2):
+            state[4 + j] = alpha_m[j]
+        state[12] = 1.0
+    cw = Ts / (g[4] + Ts)
+    cs = Ts / (g[5] + Ts)
+    for i in range(4):
+        state[6 + i] += cw * ((beta_m[i] - state[i]) / Ts - state[6 + i])
+        state[i] = beta_m[i]
+    for j in range(2):
+        state[10 + j] += cs * ((alpha_m[j] - state[4 + j]) / Ts - state[10 + j])
+        state[4 + j] = alpha_m[j]
+    for i in range(4):
+        u[i] = u_ff[k, i]
+    if g[7] == 0.0:
+        return
+    lateral = mode_d[k] == 3
+    for j in range(2):
+        e_f = beta_d[k, 2 * j] - beta_m[2 * j]
+        e_r = beta_d[k, 2 * j + 1] - beta_m[2 * j + 1]
+        v_f = beta_dot_d[k, 2 * j] - state[6 + 2 * j]
+        v_r = beta_dot_d[k, 2 * j + 1] - state[7 + 2 * j]
+        if not lateral:  # the front-rear difference of a side is its steering: left to the steering loop
+            e_f = e_r = 0.5 * (e_f + e_r)
+            v_f = v_r = 0.5 * (v_f + v_r)
+        u[2 * j] += g[0] * v_f + g[1] * e_f
+        u[2 * j + 1] += g[0] * v_r + g[1] * e_r
+    for j in range(2):
+        e = alpha_d[k, j] - alpha_m[j]
+        if lateral or abs(alpha_d[k, j]) > 0.5 * math.pi - 0.05:
+            # the steering rests on (or goes to) its stop, where pushing it means pushing the chassis
+            # sideways (mode 3: steering torque = a F_y of the side): no integral part
+            state[13 + j] = 0.0
+        else:  # integral part, clamped (anti-windup)
+            state[13 + j] = min(max(state[13 + j] + g[8] * e * Ts, -g[9]), g[9])
+        ts = g[2] * e + g[3] * (alpha_dot_d[k, j] - state[10 + j]) + state[13 + j]
+        dm = ts * g[6]
+        s = 1.0 if j == 0 else -1.0
+        u[2 * j] += -s * dm      # front wheel of the side (h = +1)
+        u[2 * j + 1] += s * dm   # rear wheel (h = -1)
+
+
+# --- closed loop ---
+
+@njit(cache=True)
+def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
+              u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, steer_noise, torque_noise, torque_offset,
+              pos, vel, cstate, work,
+              out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_energy, out_work):
+    """Simulate samples k0..k1-1 in place; ``pos``, ``vel``, ``cstate``, ``work`` carry the state."""
+    M = np.zeros((9, 9))
+    A = np.zeros((8, 9))
+    K = np.zeros((9, 9))
+    h = np.zeros(9)
+    rhs = np.zeros(9)
+    slip = np.zeros(8)
+    dvec = np.zeros(8)
+    alpha_m = np.zeros(2)
+    beta_m = np.zeros(4)
+    u = np.zeros(4)
+    ua = np.zeros(4)
+    dt = Ts / substeps
+    lim = c[_TLIM]
+    for k in range(k0, k1):
+        read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m)
+        controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, cstate, u)
+        for i in range(4):
+            ua[i] = min(max(u[i], -lim), lim)
+        out_pos[k] = pos
+        out_vel[k] = vel
+        out_alpha[k] = alpha_m
+        out_beta[k] = beta_m
+        out_energy[k] = kinetic_energy(c, pos, vel, M)
+        out_work[k] = work
+        for i in range(4):
+            out_cmd[k, i] = u[i]
+            out_app[k, i] = ua[i]
+            out_meas[k, i] = ua[i] + torque_offset[i] + torque_noise[k, i]
+        for j in range(substeps):
+            plant_step(c, pos, vel, ua, dt, work, M, A, K, h, rhs, slip, dvec)
