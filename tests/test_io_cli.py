@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from agvdyn.cli import app
 from agvdyn.io import read_log, write_bag, write_log, Log, read_mapping
 from agvdyn.kinematics import Mode, nominal_steering
-from agvdyn.platform import PROTOTYPE
+from agvdyn.platform import PROTOTYPE, Geometry, write_platform
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "examples" / "mappings"
 runner = CliRunner()
@@ -94,3 +94,19 @@ def test_convert_refuses_to_overwrite_its_input(tmp_path):
     result = runner.invoke(app, ["convert", str(path), "--out", str(path)])
     assert result.exit_code == 2 and "overwrite the input" in result.output
     assert path.read_bytes() == before
+
+
+def test_inspect_uses_the_platform_of_the_sidecar(tmp_path):
+    square = Geometry(l=1.0, b=1.0, a=0.05, r=0.1, i_G=20.0, name="square")
+    frame = mode_log()
+    rot = nominal_steering(square, Mode.ROTATION)  # +-45 degrees, not the prototype's +-56.3
+    late = frame["t"].to_numpy() >= 2.0
+    frame.loc[late, "alpha_l"], frame.loc[late, "alpha_r"] = rot[0], rot[1]
+    frame.loc[(frame["t"] > 1.0) & ~late, ["alpha_l", "alpha_r"]] = 0.3 * rot  # somewhere in between
+    path = write_log(tmp_path / "sq.parquet", frame, {"platform": square.to_dict()})
+    info = json.loads(runner.invoke(app, ["inspect", str(path), "--json"]).output)
+    assert info["platform"]["name"] == "square"
+    assert info["modes"][-1]["mode"] == "4"
+    write_platform(tmp_path / "proto.yaml", PROTOTYPE)
+    info = json.loads(runner.invoke(app, ["inspect", str(path), "--json", "--platform", str(tmp_path / "proto.yaml")]).output)
+    assert info["modes"][-1]["mode"] != "4"

@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agvdyn.cli._app import app, fail
-from agvdyn.io import LogError, MappingError, load_log, write_log
+from agvdyn.io import LogError, MappingError, load_log, sidecar_platform, write_log
 from agvdyn.io.summary import summarize_log
 from agvdyn.kinematics import MODE_TOLERANCE
 from agvdyn.platform import PROTOTYPE, PlatformFileError, read_platform
@@ -41,7 +41,8 @@ def convert(
     try:
         log = load_log(input, mapping, geom)
         sidecar = dict(log.sidecar)
-        sidecar.setdefault("platform", geom.to_dict())
+        if platform is not None or "platform" not in sidecar:
+            sidecar["platform"] = geom.to_dict()  # the platform whose i_G the conversion used
         written = write_log(out, log.frame, sidecar)
     except _LOAD_ERRORS as exc:
         raise fail(str(exc)) from exc
@@ -68,6 +69,8 @@ def inspect(
     geom = _platform(platform)
     try:
         log = load_log(log_path, mapping, geom)
+        if platform is None:  # a log that records its platform is inspected with it
+            geom = sidecar_platform(log) or geom
         summary = summarize_log(log, geom, tolerance=tolerance)
     except _LOAD_ERRORS as exc:
         raise fail(str(exc)) from exc
@@ -81,6 +84,7 @@ def inspect(
     console.print(f"samples   {summary.n_samples}")
     console.print(f"time      {summary.t_start:.6g} s .. {summary.t_end:.6g} s (duration {summary.duration:.3f} s)")
     console.print(f"rate      {summary.rate:.6g} Hz (median sample time {summary.sample_time * 1e3:.4g} ms)")
+    console.print(f"platform  {geom.name} (l={geom.l:g} m, b={geom.b:g} m, i_G={geom.i_G:g})")
     for note in summary.notes:
         console.print(f"note      {note}")
     if summary.segments:

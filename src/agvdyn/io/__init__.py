@@ -15,6 +15,7 @@ from agvdyn.io.log import (
     read_log,
     read_sidecar,
     sidecar_path,
+    sidecar_platform,
     write_log,
 )
 from agvdyn.io.mapping import LogMapping, MappingError, Signal, mapping_from_dict, read_mapping
@@ -22,7 +23,7 @@ from agvdyn.io.table import read_mapped_table
 
 __all__ = [
     "LOG_COLUMNS", "SEGMENT_COLUMN", "SEGMENTS", "Log", "LogError", "SegmentRun",
-    "check_frame", "read_log", "read_sidecar", "sidecar_path", "write_log",
+    "check_frame", "read_log", "read_sidecar", "sidecar_path", "sidecar_platform", "write_log",
     "LogMapping", "MappingError", "Signal", "mapping_from_dict", "read_mapping",
     "load_log", "read_mapped_table", "is_bag", "read_bag", "write_bag",
 ]

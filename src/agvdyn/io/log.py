@@ -18,6 +18,7 @@ import pandas as pd
 import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
+from agvdyn.platform import Geometry
 
 #: Required columns of a log, in the order of PLATFORM.md.
 LOG_COLUMNS = (
@@ -373,6 +374,27 @@ def read_log(path: str | os.PathLike, *, max_gap_samples: float = MAX_GAP_SAMPLE
     frame = read_table(path)
     checked = check_frame(frame, path, max_gap_samples=max_gap_samples, csv_rows=path.suffix.lower() == ".csv")
     return Log(path, checked, read_sidecar(path))
+
+
+def sidecar_platform(log: Log) -> Geometry | None:
+    """The platform recorded in a log's sidecar (``platform: {l, b, a, r, i_G, name}``), None without one.
+
+    Raises
+    ------
+    LogError
+        The sidecar has a ``platform`` entry that is not a valid geometry.
+    """
+    data = log.sidecar.get("platform") if isinstance(log.sidecar, dict) else None
+    if data is None:
+        return None
+    where = sidecar_path(log.path) if log.path is not None else "sidecar"
+    keys = ("l", "b", "a", "r", "i_G")
+    if not isinstance(data, dict) or any(k not in data for k in keys):
+        raise LogError(f"{where}: platform: expected a mapping with {list(keys)}, found {data!r}")
+    try:
+        return Geometry(**{k: data[k] for k in keys}, name=str(data.get("name", "sidecar")))
+    except (TypeError, ValueError) as exc:
+        raise LogError(f"{where}: platform: {exc}") from exc
 
 
 def _plain(value: Any) -> Any:

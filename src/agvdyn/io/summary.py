@@ -40,6 +40,7 @@ class LogSummary:
     mode_time: dict[str, float]
     tolerance: float
     notes: tuple[str, ...]
+    platform: dict[str, Any]
 
     @property
     def duration(self) -> float:
@@ -58,6 +59,7 @@ class LogSummary:
             "modes": [{"mode": m.mode.label, "name": m.mode.name.lower(), "start": m.t_start, "end": m.t_end,
                        "duration": m.duration, "rows": [m.start, m.stop]} for m in self.modes],
             "mode_time": self.mode_time, "mode_tolerance": self.tolerance, "notes": list(self.notes),
+            "platform": self.platform,
         }
 
 
@@ -87,5 +89,5 @@ def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLER
         notes = (f"resampled at {conv['rate']:g} Hz: {conv['method']}",) + notes
     return LogSummary(
         str(log.path) if log.path else None, log.n_samples, float(log.t[0]), float(log.t[-1]), log.sample_time,
-        log.segment_runs(), runs, mode_time, tolerance, notes,
+        log.segment_runs(), runs, mode_time, tolerance, notes, geometry.to_dict(),
     )
