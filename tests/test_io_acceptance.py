@@ -1,10 +1,15 @@
 """Acceptance of issue 5: an identification log round-tripped through a ROS 2 bag written with
 ros2_control joint names gives the same identified parameters as the original log (within 0.1 %).
 
-Three variants. The first: the log is model data of the paper's identification sequence (tests/model_logs.py: steer_left,
-steer_right, straight, rotation, with alignment at rest between them) with sensor noise added,
-so that the identification works on realistic, not exact, signals. The bag carries no segment
-column: the segments come back through time ranges in the mapping, as a user would write them.
+Three variants:
+1. model data of the paper's identification sequence (tests/model_logs.py: steer_left,
+   steer_right, straight, rotation, with alignment at rest between them) with sensor noise
+   added, through sqlite3 and MCAP bags written by ``write_bag`` (stamps on the log's samples);
+2. the same model data at irregular stamps with steering and wheel joints in separate messages,
+   so that the resampling really interpolates (noise free: the difference is the resampling);
+3. a run of the project's closed-loop simulator (``agvdyn.simulation.simulate``).
+Bags carry no segment column: the segments come back through time ranges in the mapping, as a
+user would write them.
 """
 from __future__ import annotations
 
