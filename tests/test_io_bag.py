@@ -246,3 +246,14 @@ def test_write_bag_round_trip(tmp_path, storage):
         np.testing.assert_allclose(back.frame[col], log.frame[col], rtol=1e-12, atol=1e-12, err_msg=col)
     with pytest.raises(LogError, match="exists already"):
         write_bag(log, path, mapping, storage, geometry=PROTOTYPE)
+
+
+def test_unreadable_bag(tmp_path):
+    bag = tmp_path / "broken"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 99}\n")
+    with pytest.raises(LogError, match=r"broken: cannot be read as a ROS 2 bag"):
+        load_log(bag, EXAMPLE)
+    (tmp_path / "junk.mcap").write_bytes(b"not an mcap file")
+    with pytest.raises(LogError, match=r"junk\.mcap: cannot be read as a ROS 2 bag"):
+        load_log(tmp_path / "junk.mcap", EXAMPLE)

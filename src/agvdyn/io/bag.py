@@ -63,31 +63,28 @@ class _Messages:
 
 
 def _read_messages(path: Path, topic: str) -> _Messages:
-    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2 import Reader, ReaderError
 
-    try:
-        reader = Reader(path)
-    except FileNotFoundError as exc:
-        raise LogError(f"{path}: not a ROS 2 bag: {exc}") from exc
-    except Exception as exc:  # rosbags raises its own ReaderError for unreadable bags
-        raise LogError(f"{path}: cannot be opened as a ROS 2 bag: {exc}") from exc
     typestore = _typestore()
-    with reader:
-        conns = [c for c in reader.connections if c.topic == topic]
-        if not conns:
-            found = {c.topic: c.msgtype for c in reader.connections}
-            raise LogError(f"{path}: no topic {topic!r} in the bag; topics found: {found}; set 'topic' in the mapping")
-        wrong = [c.msgtype for c in conns if c.msgtype != JOINT_STATE]
-        if wrong:
-            raise LogError(f"{path}: topic {topic!r} has message type {wrong[0]}: expected {JOINT_STATE}")
-        stamps, received, names, position, effort = [], [], [], [], []
-        for _conn, timestamp, raw in reader.messages(connections=conns):
-            msg = typestore.deserialize_cdr(raw, JOINT_STATE)
-            stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
-            received.append(timestamp)
-            names.append(tuple(msg.name))
-            position.append(msg.position)
-            effort.append(msg.effort)
+    stamps, received, names, position, effort = [], [], [], [], []
+    try:
+        with Reader(path) as reader:
+            conns = [c for c in reader.connections if c.topic == topic]
+            if not conns:
+                found = {c.topic: c.msgtype for c in reader.connections}
+                raise LogError(f"{path}: no topic {topic!r} in the bag; topics found: {found}; set 'topic' in the mapping")
+            wrong = [c.msgtype for c in conns if c.msgtype != JOINT_STATE]
+            if wrong:
+                raise LogError(f"{path}: topic {topic!r} has message type {wrong[0]}: expected {JOINT_STATE}")
+            for _conn, timestamp, raw in reader.messages(connections=conns):
+                msg = typestore.deserialize_cdr(raw, JOINT_STATE)
+                stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+                received.append(timestamp)
+                names.append(tuple(msg.name))
+                position.append(msg.position)
+                effort.append(msg.effort)
+    except (ReaderError, FileNotFoundError) as exc:
+        raise LogError(f"{path}: cannot be read as a ROS 2 bag (sqlite3 or MCAP): {exc}") from exc
     if not stamps:
         raise LogError(f"{path}: topic {topic!r} has no messages")
     return _Messages(np.array(stamps, dtype=np.int64), np.array(received, dtype=np.int64), names, position, effort)
