@@ -110,3 +110,17 @@ def test_inspect_uses_the_platform_of_the_sidecar(tmp_path):
     write_platform(tmp_path / "proto.yaml", PROTOTYPE)
     info = json.loads(runner.invoke(app, ["inspect", str(path), "--json", "--platform", str(tmp_path / "proto.yaml")]).output)
     assert info["modes"][-1]["mode"] != "4"
+
+
+def test_short_mode_runs_are_merged_only_in_the_listing(tmp_path):
+    frame = mode_log()
+    blips = [100, 101, 300]  # single rows leaving the straight configuration (noise)
+    frame.loc[blips, "alpha_l"] = 0.1
+    path = write_log(tmp_path / "blips.parquet", frame)
+    raw = json.loads(runner.invoke(app, ["inspect", str(path), "--json", "--min-duration", "0"]).output)
+    merged = json.loads(runner.invoke(app, ["inspect", str(path), "--json"]).output)
+    assert [m["mode"] for m in raw["modes"]] == ["2s", "1", "2s", "1", "2s", "1", "4"]
+    assert [m["mode"] for m in merged["modes"]] == ["2s", "1", "4"]
+    assert merged["detected_runs"] == 7
+    assert merged["mode_time"] == raw["mode_time"]  # totals from the detection, not the merged list
+    assert raw["mode_time"]["1"] == pytest.approx(merged["modes"][1]["duration"] + 0.002 + 3 * 0.002, abs=1e-9)

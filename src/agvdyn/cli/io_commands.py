@@ -62,6 +62,7 @@ def inspect(
     mapping: Optional[Path] = typer.Option(None, help="Mapping file for tables with other names/units and for bags."),
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
     tolerance: float = typer.Option(MODE_TOLERANCE, help="Tolerance of the mode detection (rad), eq. (9)."),
+    min_duration: float = typer.Option(0.05, help="Mode runs shorter than this (s) are merged into the preceding run in the list (0: list every run)."),
     max_rows: int = typer.Option(40, help="Longest list of mode runs printed; the rest is counted."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
@@ -71,7 +72,7 @@ def inspect(
         log = load_log(log_path, mapping, geom)
         if platform is None:  # a log that records its platform is inspected with it
             geom = sidecar_platform(log) or geom
-        summary = summarize_log(log, geom, tolerance=tolerance)
+        summary = summarize_log(log, geom, tolerance=tolerance, min_duration=min_duration)
     except _LOAD_ERRORS as exc:
         raise fail(str(exc)) from exc
     except ValueError as exc:
@@ -96,7 +97,11 @@ def inspect(
         console.print(table)
     else:
         console.print("segments  none (no segment column)")
-    table = Table(title=f"motion modes detected from alpha (eq. 9, tolerance {summary.tolerance:g} rad)", title_justify="left")
+    title = f"motion modes detected from alpha (eq. 9, tolerance {summary.tolerance:g} rad)"
+    if summary.min_duration > 0 and summary.n_detected_runs > len(summary.modes):
+        title += (f"; {summary.n_detected_runs} detected runs, those shorter than {summary.min_duration:g} s "
+                  "merged into the preceding run")
+    table = Table(title=title, title_justify="left")
     for col in ("mode", "start (s)", "end (s)", "duration (s)"):
         table.add_column(col, justify="left" if col == "mode" else "right")
     for m in summary.modes[:max_rows]:

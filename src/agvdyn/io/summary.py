@@ -1,7 +1,7 @@
 """What a log holds: duration, rate, segments and the motion modes over time (``agvdyn inspect``)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,8 @@ class LogSummary:
     tolerance: float
     notes: tuple[str, ...]
     platform: dict[str, Any]
+    min_duration: float = 0.0
+    n_detected_runs: int = 0
 
     @property
     def duration(self) -> float:
@@ -58,7 +60,8 @@ class LogSummary:
                          for s in self.segments],
             "modes": [{"mode": m.mode.label, "name": m.mode.name.lower(), "start": m.t_start, "end": m.t_end,
                        "duration": m.duration, "rows": [m.start, m.stop]} for m in self.modes],
-            "mode_time": self.mode_time, "mode_tolerance": self.tolerance, "notes": list(self.notes),
+            "mode_time": self.mode_time, "mode_tolerance": self.tolerance,
+            "min_duration": self.min_duration, "detected_runs": self.n_detected_runs, "notes": list(self.notes),
             "platform": self.platform,
         }
 
@@ -73,14 +76,34 @@ def mode_runs(geometry: Geometry, log: Log, tolerance: float = MODE_TOLERANCE) -
     return tuple(ModeRun(Mode(int(modes[a])), int(a), int(b), float(t[a]), float(t[b - 1])) for a, b in zip(starts, stops))
 
 
-def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLERANCE) -> LogSummary:
+def merged_runs(runs: tuple[ModeRun, ...], sample_time: float, min_duration: float) -> tuple[ModeRun, ...]:
+    """Runs with those shorter than ``min_duration`` (rows x sample time) merged into the preceding run.
+
+    Noise makes the detection flicker where alpha passes a tolerance boundary; merging keeps the
+    overview readable. The first run is never merged away; neighbours of equal mode are joined.
+    """
+    out: list[ModeRun] = []
+    for run in runs:
+        short = (run.stop - run.start) * sample_time < min_duration
+        if out and (short or out[-1].mode == run.mode):
+            out[-1] = replace(out[-1], stop=run.stop, t_end=run.t_end)
+        else:
+            out.append(run)
+    return tuple(out)
+
+
+def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLERANCE, min_duration: float = 0.0) -> LogSummary:
     """Summary of a log for people: timing, segments, detected modes and the time spent in each.
 
-    The time of a mode counts one sample time per row detected in it.
+    The time of a mode counts one sample time per row detected in it (before any merging).
+    With ``min_duration > 0`` the listed runs are :func:`merged_runs`.
     """
-    runs = mode_runs(geometry, log, tolerance)
+    if not min_duration >= 0:
+        raise ValueError(f"min_duration={min_duration!r}: expected a number >= 0 (s)")
+    detected = mode_runs(geometry, log, tolerance)
+    runs = merged_runs(detected, log.sample_time, min_duration) if min_duration > 0 else detected
     mode_time: dict[str, float] = {}
-    for run in runs:
+    for run in detected:
         key = run.mode.label
         mode_time[key] = mode_time.get(key, 0.0) + (run.stop - run.start) * log.sample_time
     conv = log.sidecar.get("conversion", {}) if isinstance(log.sidecar, dict) else {}
@@ -89,5 +112,5 @@ def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLER
         notes = (f"resampled at {conv['rate']:g} Hz: {conv['method']}",) + notes
     return LogSummary(
         str(log.path) if log.path else None, log.n_samples, float(log.t[0]), float(log.t[-1]), log.sample_time,
-        log.segment_runs(), runs, mode_time, tolerance, notes, geometry.to_dict(),
+        log.segment_runs(), runs, mode_time, tolerance, notes, geometry.to_dict(), min_duration, len(detected),
     )
