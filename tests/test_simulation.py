@@ -1,0 +1,212 @@
+"""Closed-loop simulator: energy balance, stiction, convergence to the rolling-constraint model,
+tracking, reproducibility and the log schema."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from agvdyn.io import LOG_COLUMNS, read_log
+from agvdyn.kinematics import Mode
+from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE
+from agvdyn.simulation import (
+    ControllerSettings,
+    PlantSettings,
+    SimulationSettings,
+    feedforward_table,
+    plant_constants,
+    run_open_loop,
+    simulate,
+)
+from agvdyn.trajectories import (
+    FourierSeries,
+    LimitError,
+    Trajectory,
+    fourier_segment,
+    identification_sequence,
+    lane_change,
+    lateral_experiment,
+)
+
+G, P = PROTOTYPE, PAPER_PARAMETERS
+
+
+def _series(period: float, peak: float) -> FourierSeries:
+    return FourierSeries.at_rest(2 * math.pi / period, (1.0, -0.5, 0.3), (0.2, 0.5, -0.4), peak_velocity=peak)
+
+
+@pytest.fixture(scope="module")
+def short_sequence() -> Trajectory:
+    """The identification sequence with 4 s segments (the default one lasts 118 s)."""
+    return identification_sequence(steer_left=_series(4, 1.2), steer_right=_series(4, 1.2),
+                                   straight=_series(5, 0.4), rotation=_series(5, 0.5), pause=0.2)
+
+
+@pytest.fixture(scope="module")
+def result(short_sequence):
+    """Closed loop with a controller whose parameters are 20 % off the plant's."""
+    wrong = P.from_vector(P.to_vector() * np.where(np.arange(11) % 2 == 0, 1.2, 0.8))
+    return simulate(short_sequence, controller_params=wrong, seed=3)
+
+
+def test_power_balance(result):
+    """Motor work = dissipated work + stop work + change of kinetic energy, within 0.1 % of the motor work.
+
+    The remainder is the numerical dissipation of the implicit Euler step (~1e-4 of the motor work).
+    The plant runs with all neglected effects on (steering-unit masses with their Coriolis coupling).
+    """
+    assert result.settings.plant.steering_masses
+    w_motor, w_diss, w_stop = result.work[-1]
+    balance = result.energy[-1] - result.energy[0] + w_diss - w_stop - w_motor
+    assert w_motor > 100.0
+    assert abs(balance) < 1e-3 * w_motor
+
+
+def test_vehicle_at_rest_stays_at_rest():
+    """Zero torque: nothing moves at all (true stiction, not a tanh that creeps)."""
+    c = plant_constants(G, P, PlantSettings())
+    pos0 = np.zeros(9)
+    pos0[3:5] = (0.3, -0.2)
+    pos, vel, _, _ = run_open_loop(c, pos0, np.zeros(9), np.zeros((1000, 4)), 2e-3, 4)
+    np.testing.assert_array_equal(pos[-1], pos0)
+    np.testing.assert_array_equal(vel[-1], 0.0)
+
+
+def _steer_at_rest(steering_torque: float, coulomb: str) -> float:
+    """Steering angle change (rad) after 2 s of a constant steering torque on the left side, at rest."""
+    c = plant_constants(G, P, replace(PlantSettings(), coulomb=coulomb))
+    dm = steering_torque * G.r / (2 * G.a * G.i_G)  # differential motor torque front/rear
+    u = np.tile([-dm, dm, 0.0, 0.0], (1000, 1))
+    pos0 = np.zeros(9)
+    pos0[3:5] = (0.3, 0.0)
+    pos, _, _, _ = run_open_loop(c, pos0, np.zeros(9), u, 2e-3, 4)
+    return pos[-1, 3] - pos0[3]
+
+
+def test_stiction_holds_below_breakaway_and_slides_above():
+    # breakaway: d_cl on the steering plus d_cw of both wheels through the lever r/a (about 17 N m)
+    breakaway = P.d_cl + 2 * P.d_cw * G.a / G.r
+    assert abs(_steer_at_rest(0.5 * breakaway, "stiction")) < 2e-4
+    assert abs(_steer_at_rest(0.5 * breakaway, "tanh")) > 5e-3  # the model's tanh creeps
+    assert _steer_at_rest(2.0 * breakaway, "stiction") > 0.1
+
+
+def _open_loop_error(traj: Trajectory, stiffness: float) -> float:
+    settings = replace(PlantSettings().ideal(), slip_stiffness_long=stiffness, slip_stiffness_lat=stiffness,
+                       mu=100.0, substeps=16)
+    c = plant_constants(G, P, settings)
+    u = traj.feedforward(P)
+    qd, _ = traj.joint_motion()
+    pos0 = np.zeros(9)
+    pos0[3:5] = traj.alpha[0]
+    _, vel, _, _ = run_open_loop(c, pos0, np.zeros(9), u, 2e-3, 16)
+    return float(np.sqrt(np.mean((vel[:-1] - qd) ** 2)) / np.sqrt(np.mean(qd**2)))
+
+
+@pytest.mark.parametrize("mode", [Mode.PARKING, Mode.STRAIGHT, Mode.ROTATION])
+def test_plant_converges_to_the_rolling_constraint_model(mode):
+    """The feed-forward of eq. (21) with the true parameters is the constrained model's input for the
+    planned motion; driven open loop by it, the plant (neglected effects off, tyre friction not
+    limiting) follows the plan the better the stiffer the tyres: the error falls like 1/C (measured
+    order between 0.7 and 1.3) until the integration floor (torques held over T_s)."""
+    series = _series(3, 1.0 if mode is Mode.PARKING else 0.6)
+    seg = fourier_segment({Mode.PARKING: "steer_left", Mode.STRAIGHT: "straight", Mode.ROTATION: "rotation"}[mode],
+                          mode, (series, series) if mode is Mode.PARKING else series)
+    traj = Trajectory((seg,))
+    errors = [_open_loop_error(traj, c) for c in (1e3, 3e3, 1e4, 1e5)]
+    order = math.log(errors[0] / errors[2]) / math.log(10)
+    assert errors[0] > errors[1] > errors[2] > errors[3]
+    assert errors[0] > 0.05  # soft tyres: the plant is far from the constrained model
+    assert 0.7 < order < 1.3, errors
+    assert errors[3] < 0.02, errors
+
+
+def test_tracking_errors_per_segment(result):
+    table = result.tracking().set_index("segment", append=True)
+    assert list(dict.fromkeys(result.segment)) == ["align", "steer_left", "steer_right", "straight", "rotation"]
+    assert table["steering_max"].max() < 0.03           # rad, the mode tolerance of detect_mode is 0.02
+    assert table["wheel_speed_rms"].max() < 0.05         # rad/s on the wheel side
+    assert table["speed_rms"].max() < 0.005              # m/s
+    assert table["position_error"].max() < 0.05          # m, over the whole run
+    assert table["odometry_drift"].max() < 0.01          # m
+    assert table["saturated"].max() == 0.0
+
+
+def test_lane_change_and_lateral_are_followed():
+    lane = simulate(lane_change(speed=0.8, offset=1.0, length=5.0, straight_before=0.2, straight_after=0.2), seed=1)
+    row = lane.tracking().iloc[0]
+    assert row["steering_max"] < 0.03 and row["heading_error"] < 0.02 and row["position_error"] < 0.05
+    assert lane.position[-1, 1] == pytest.approx(1.0, abs=0.05)
+    lateral = simulate(lateral_experiment(series=_series(4, 0.4), pause=0.2), seed=1)
+    tab = lateral.tracking()
+    assert tab["steering_max"].max() < 0.03 and tab["position_error"].max() < 0.02
+    # the steering rests on its stops during the lateral motion
+    lat = lateral.segment == "lateral"
+    assert np.all(np.abs(np.abs(lateral.position[lat, 3:5]) - math.pi / 2) < 0.02)
+
+
+def test_same_seed_same_log_other_seed_other_noise(short_sequence):
+    traj = Trajectory(short_sequence.segments[:2])
+    a = simulate(traj, seed=7).log_frame()
+    b = simulate(traj, seed=7).log_frame()
+    c = simulate(traj, seed=8).log_frame()
+    assert a.equals(b)
+    assert not np.array_equal(a["m_fl"].to_numpy(), c["m_fl"].to_numpy())
+
+
+def test_sensor_models(result):
+    res = 2 * math.pi / (4096 * G.i_G)
+    counts = result.beta_measured / res
+    np.testing.assert_allclose(counts, np.round(counts), atol=1e-6)
+    assert np.max(np.abs(result.beta_measured - result.position[:, 5:])) <= res
+    err = result.alpha_measured - result.position[:, 3:5]
+    assert 2e-4 < np.std(err) < 1e-3  # 0.5 mrad noise + 0.38 mrad quantization
+    offset = np.mean(result.torque_measured - result.torque_applied, axis=0)
+    assert np.all(np.abs(offset) < 0.1) and np.ptp(offset) > 1e-3
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".csv"])
+def test_log_schema_and_sidecar(tmp_path, result, suffix):
+    path = result.write(tmp_path / f"run{suffix}")
+    log = read_log(path)
+    assert list(log.frame.columns[: len(LOG_COLUMNS)]) == list(LOG_COLUMNS)
+    assert set(log.segments) == {"align", "steer_left", "steer_right", "straight", "rotation"}
+    np.testing.assert_allclose(log.t[1] - log.t[0], 2e-3)
+    np.testing.assert_allclose(log.beta, result.beta_measured)
+    side = log.sidecar
+    assert side["true_parameters"] == {n: getattr(P, n) for n in PARAMETER_NAMES}
+    assert side["platform"]["l"] == G.l and side["seed"] == 3
+    assert side["settings"]["plant"]["coulomb"] == "stiction"
+
+
+def test_limits_are_checked_before_running():
+    fast = FourierSeries.at_rest(2 * math.pi / 4, (1.0, -0.5), (0.3, 0.2), peak_velocity=3.0)
+    traj = Trajectory((fourier_segment("straight", Mode.STRAIGHT, fast),))
+    with pytest.raises(LimitError, match="speed limit in segment 'straight'"):
+        simulate(traj)
+
+
+def test_torque_limit_saturates_the_drive(short_sequence):
+    traj = Trajectory(short_sequence.segments[5:6])
+    settings = SimulationSettings(plant=replace(PlantSettings(), torque_limit=0.4), check_limits=False)
+    res = simulate(traj, settings=settings)
+    assert np.max(np.abs(res.torque_applied)) <= 0.4 + 1e-12
+    assert res.tracking()["saturated"].iloc[0] > 0
+
+
+def test_feedforward_table_matches_eq21(short_sequence):
+    table = feedforward_table(short_sequence, P)
+    np.testing.assert_allclose(table[["m_fl", "m_rl", "m_fr", "m_rr"]].to_numpy(), short_sequence.feedforward(P))
+    assert set(table["mode"]) == {"1", "2s", "4"}
+    assert len(table) == short_sequence.n_samples
+
+
+def test_feedforward_alone_is_worse_than_with_feedback(short_sequence):
+    wrong = P.replace(m_ch=1.3 * P.m_ch, d_cw=0.6 * P.d_cw)
+    traj = Trajectory(short_sequence.segments[5:6])
+    with_fb = simulate(traj, controller_params=wrong).tracking().iloc[0]
+    without = simulate(traj, controller_params=wrong,
+                       settings=SimulationSettings(controller=ControllerSettings(feedback=False))).tracking().iloc[0]
+    assert with_fb["wheel_speed_rms"] < 0.5 * without["wheel_speed_rms"]
