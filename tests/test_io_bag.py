@@ -11,9 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from agvdyn.io._convert import Series, resample, uniform_grid
 from agvdyn.io import Log, LogError, load_log, mapping_from_dict, read_mapping, write_bag
 from agvdyn.io.log import LOG_COLUMNS
 from agvdyn.platform import PROTOTYPE
@@ -257,3 +260,53 @@ def test_unreadable_bag(tmp_path):
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file")
     with pytest.raises(LogError, match=r"junk\.mcap: cannot be read as a ROS 2 bag"):
         load_log(tmp_path / "junk.mcap", EXAMPLE)
+
+
+def test_receive_times_on_request(tmp_path):
+    info = write_source_bag(tmp_path / "run", "sqlite3", duration=0.5)
+    data = read_mapping(EXAMPLE).to_dict()
+    data["stamps"] = "receive"
+    by_receive = load_log(tmp_path / "run", mapping_from_dict(data))
+    by_header = load_log(tmp_path / "run", EXAMPLE)
+    assert by_receive.sidecar["conversion"]["time"] == "bag receive time"
+    assert by_receive.sidecar["conversion"]["t0_ns"] - by_header.sidecar["conversion"]["t0_ns"] == 150_000  # the latency
+    assert_matches_source(by_header, info["h_max"])
+
+
+def test_mixed_zero_and_real_header_stamps(tmp_path):
+    path = tmp_path / "run"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=TS)
+        for k in range(20):
+            ns = START_NS + k * 2_000_000
+            msg = joint_state(0 if k == 7 else ns, STEERING + WHEELS, np.zeros(8), np.zeros(8))
+            writer.write(conn, ns, TS.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+    with pytest.raises(LogError, match=r"message #7 on /joint_states .* has a zero header stamp while others have stamps"):
+        load_log(path, EXAMPLE)
+
+
+def test_joint_without_the_needed_field(tmp_path):
+    write_source_bag(tmp_path / "run", duration=0.2)
+    data = read_mapping(EXAMPLE).to_dict()
+    data["signals"]["m_fl"] = {"joint": "front_left_steering_joint"}  # steering joints publish no effort (NaN)
+    with pytest.raises(LogError, match=r"joint 'front_left_steering_joint' \(m_fl\) never has an effort value"):
+        load_log(tmp_path / "run", mapping_from_dict(data))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31),
+    slope=st.floats(-50, 50),
+    intercept=st.floats(-10, 10),
+    jitter=st.floats(0.0, 0.45),
+)
+def test_resampling_reproduces_linear_signals_exactly(seed, slope, intercept, jitter):
+    """Linear interpolation is exact on straight lines, whatever the stamps: a property of the method."""
+    rng = np.random.default_rng(seed)
+    period = 0.002
+    times = np.arange(300) * period + rng.uniform(-jitter, jitter, 300) * period
+    series = {"x": Series("x", times, intercept + slope * times), "y": Series("y", times[::2] + 1e-4, -slope * times[::2])}
+    grid = uniform_grid(series, period)
+    out = resample(series, grid, 5 * period, "src")
+    np.testing.assert_allclose(out["x"], intercept + slope * grid, rtol=0, atol=1e-9 * (1 + abs(slope)))
+    assert grid[0] >= max(times[0], times[0] + 1e-4) - 1e-15 and grid[-1] <= times[-1] + 1e-15

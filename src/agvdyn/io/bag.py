@@ -196,7 +196,7 @@ def read_bag(
         if not ok.any():
             present = idx.size > 0
             if present:
-                raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}) never has a {sig.field} value on {mapping.topic}: "
+                raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}) never has {'an effort' if sig.field == 'effort' else 'a position'} value on {mapping.topic}: "
                                f"expected {sig.field} for {'a torque' if sig.kind == 'torque' else 'an angle'}")
             raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}) not found on {mapping.topic}; joints found: {seen}")
         t_ns = times_ns[idx]
