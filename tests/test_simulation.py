@@ -210,3 +210,27 @@ def test_feedforward_alone_is_worse_than_with_feedback(short_sequence):
     without = simulate(traj, controller_params=wrong,
                        settings=SimulationSettings(controller=ControllerSettings(feedback=False))).tracking().iloc[0]
     assert with_fb["wheel_speed_rms"] < 0.5 * without["wheel_speed_rms"]
+
+
+def test_cli_simulate_and_feedforward(tmp_path):
+    from typer.testing import CliRunner
+
+    from agvdyn.cli import app
+    from agvdyn.platform import write_parameters
+
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("segments:\n  - name: straight\n    mode: straight\n"
+                    "    fourier: {base_frequency: 2.0, a: [0.3, -0.1], b: [0.1, 0.2]}\n", encoding="utf-8")
+    params = write_parameters(tmp_path / "params.yaml", P)
+    runner = CliRunner()
+    out = tmp_path / "run.csv"
+    res = runner.invoke(app, ["simulate", str(plan), "--out", str(out), "--seed", "4", "--params", str(params)])
+    assert res.exit_code == 0, res.output
+    log = read_log(out)
+    assert set(log.segments) == {"straight"} and log.sidecar["seed"] == 4
+    res = runner.invoke(app, ["feedforward", str(plan), "--params", str(params), "--out", str(tmp_path / "ff.parquet")])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["simulate", "slalom", "--out", str(out)])
+    assert res.exit_code == 2 and "unknown experiment 'slalom'" in res.output
+    res = runner.invoke(app, ["feedforward", str(plan), "--params", str(tmp_path / "missing.yaml"), "--out", str(out)])
+    assert res.exit_code == 2 and "missing.yaml" in res.output

@@ -1,0 +1,124 @@
+"""Commands ``agvdyn simulate`` and ``agvdyn feedforward`` (paper sec. 5, 6.2, 7)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from agvdyn._files import write_atomically
+from agvdyn.cli._app import app, fail
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, PlatformFileError, read_parameters, read_platform
+
+_EXPERIMENT_HELP = "identification, lane-change, lateral, or a trajectory file (.csv / .yaml, see docs/simulation.md)."
+
+
+def _platform(path: Optional[Path]):
+    if path is None:
+        return PROTOTYPE
+    try:
+        return read_platform(path)
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
+
+
+def _params(path: Optional[Path], default=PAPER_PARAMETERS):
+    if path is None:
+        return default
+    try:
+        return read_parameters(path).parameters
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
+
+
+def _output(path: Path) -> Path:
+    if path.suffix.lower() not in (".parquet", ".csv"):
+        raise fail(f"--out {path}: unknown suffix {path.suffix!r}: expected .parquet or .csv")
+    return path
+
+
+def _tracking_table(result) -> Table:
+    table = Table(title=f"Tracking and odometry drift: {result.experiment}")
+    cols = {"segment": "segment", "steering_max": "steer\nmrad", "wheel_speed_rms": "wheel\nmrad/s",
+            "speed_rms": "speed\nmm/s", "position_error": "pose\nmm", "heading_error": "head.\nmrad",
+            "odometry_drift": "odo\nmm", "saturated": "sat.\n%"}
+    scale = {"steering_max": 1e3, "wheel_speed_rms": 1e3, "speed_rms": 1e3, "position_error": 1e3,
+             "heading_error": 1e3, "odometry_drift": 1e3, "saturated": 100}
+    for key, title in cols.items():
+        table.add_column(title, justify="left" if key == "segment" else "right")
+    for _, row in result.tracking().iterrows():
+        table.add_row(row["segment"], *(f"{row[k] * scale[k]:.1f}" for k in cols if k != "segment"))
+    return table
+
+
+@app.command()
+def simulate(
+    experiment: str = typer.Argument(..., help=_EXPERIMENT_HELP),
+    out: Path = typer.Option(..., "--out", help="Log to write (.parquet or .csv) plus its YAML sidecar <out>.yaml."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    params: Optional[Path] = typer.Option(None, help="True parameters of the simulated vehicle (YAML/JSON); "
+                                                    "default: Table 2 of the paper with B_w = 0.121."),
+    controller_params: Optional[Path] = typer.Option(None, help="The controller's parameter estimate for the "
+                                                               "feed-forward; default: the true parameters."),
+    seed: int = typer.Option(0, help="Seed of the sensor noise; equal seeds give equal logs."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar and no table."),
+) -> None:
+    """Simulate an experiment in closed loop (plant with tyre slip) and write the log the sensors record."""
+    from agvdyn.simulation import simulate as run
+    from agvdyn.trajectories import TrajectoryError
+
+    geom = _platform(platform)
+    true_params = _params(params)
+    ctrl_params = _params(controller_params, true_params)
+    _output(out)
+    console = Console(stderr=True)
+    try:
+        if quiet:
+            result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params, seed=seed)
+        else:
+            with Progress(TextColumn("simulating {task.description}"), BarColumn(),
+                          TextColumn("{task.completed:.1f} s of motion"), TimeElapsedColumn(),
+                          console=console) as bar:
+                task = bar.add_task(experiment, total=None)
+
+                def progress(done: int, total: int) -> None:
+                    bar.update(task, completed=done * SAMPLE_TIME, total=total * SAMPLE_TIME)
+
+                result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params,
+                             seed=seed, progress=progress)
+        path = result.write(out)
+    except (TrajectoryError, ValueError, OSError, FloatingPointError) as exc:
+        raise fail(str(exc)) from exc
+    if not quiet:
+        console.print(_tracking_table(result))
+        fs = result.trajectory.floor_space()
+        console.print(f"floor space {fs.length:.2f} m x {fs.width:.2f} m, duration {result.trajectory.duration:.1f} s")
+    typer.echo(f"wrote {path} ({result.trajectory.n_samples} samples) and {path}.yaml")
+
+
+@app.command()
+def feedforward(
+    experiment: str = typer.Argument(..., help=_EXPERIMENT_HELP),
+    params: Path = typer.Option(..., help="Parameter file (YAML/JSON) of the feed-forward, eq. (21)."),
+    out: Path = typer.Option(..., "--out", help="Table to write (.csv or .parquet)."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+) -> None:
+    """Write the planned trajectory with its feed-forward motor torques of eq. (21), one row per 2 ms."""
+    from agvdyn.simulation import feedforward_table
+    from agvdyn.trajectories import TrajectoryError
+
+    geom = _platform(platform)
+    p = _params(params)
+    _output(out)
+    try:
+        table = feedforward_table(experiment, p, geom)
+    except (TrajectoryError, ValueError) as exc:
+        raise fail(str(exc)) from exc
+    if out.suffix.lower() == ".csv":
+        write_atomically(out, lambda tmp: table.to_csv(tmp, index=False))
+    else:
+        write_atomically(out, lambda tmp: table.to_parquet(tmp, index=False))
+    typer.echo(f"wrote {out} ({len(table)} rows; motor torques m_fl, m_rl, m_fr, m_rr in N m)")
