@@ -61,7 +61,7 @@ def main() -> None:
         mapping = read_mapping(MAPPING)
         for storage in ("sqlite3", "mcap"):
             t0 = time.perf_counter()
-            bag = write_bag(log, tmp / f"bag_{storage}", mapping, storage, geometry=PROTOTYPE)
+            bag = write_bag(log, tmp / f"bag_{storage}", mapping, storage, platform=PROTOTYPE)
             w = time.perf_counter() - t0
             t0 = time.perf_counter()
             back = load_log(bag, mapping)

@@ -44,7 +44,7 @@ def noisy_identification_log(seed: int = 5) -> Log:
 def test_acceptance_identification_through_a_ros2_bag(tmp_path, storage):
     log = noisy_identification_log()
     mapping = read_mapping(EXAMPLE)
-    bag = write_bag(log, tmp_path / "ident_bag", mapping, storage, geometry=PROTOTYPE)
+    bag = write_bag(log, tmp_path / "ident_bag", mapping, storage, platform=PROTOTYPE)
     # Segments as a user would write them in the mapping: time ranges of the recorded phases.
     dt = log.sample_time
     ranges = [{"name": r.name, "start": r.t_start, "end": r.t_end + dt / 2} for r in log.segment_runs()]
@@ -136,7 +136,7 @@ def test_acceptance_simulated_identification_log_through_a_ros2_bag(tmp_path):
     path = result.write(tmp_path / "sim.parquet")
     log = load_log(path)
     mapping = read_mapping(EXAMPLE)
-    bag = write_bag(log, tmp_path / "sim_bag", mapping, "mcap", geometry=PROTOTYPE)
+    bag = write_bag(log, tmp_path / "sim_bag", mapping, "mcap", platform=PROTOTYPE)
     data = mapping.to_dict()
     data["segments"] = [{"name": r.name, "start": r.t_start, "end": r.t_end + log.sample_time / 2}
                         for r in log.segment_runs()]

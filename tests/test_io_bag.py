@@ -241,14 +241,14 @@ def smooth_log(n: int = 600, dt: float = 0.002) -> Log:
 def test_write_bag_round_trip(tmp_path, storage):
     log = smooth_log()
     mapping = read_mapping(EXAMPLE)
-    path = write_bag(log, tmp_path / "out", mapping, storage, geometry=PROTOTYPE)
+    path = write_bag(log, tmp_path / "out", mapping, storage, platform=PROTOTYPE)
     back = load_log(path, mapping)
     assert back.sidecar["conversion"]["rate"] == pytest.approx(500.0)
     np.testing.assert_allclose(back.t, log.t, atol=1e-12)
     for col in LOG_COLUMNS[1:]:
         np.testing.assert_allclose(back.frame[col], log.frame[col], rtol=1e-12, atol=1e-12, err_msg=col)
     with pytest.raises(LogError, match="exists already"):
-        write_bag(log, path, mapping, storage, geometry=PROTOTYPE)
+        write_bag(log, path, mapping, storage, platform=PROTOTYPE)
 
 
 def test_unreadable_bag(tmp_path):
@@ -310,3 +310,15 @@ def test_resampling_reproduces_linear_signals_exactly(seed, slope, intercept, ji
     out = resample(series, grid, 5 * period, "src")
     np.testing.assert_allclose(out["x"], intercept + slope * grid, rtol=0, atol=1e-9 * (1 + abs(slope)))
     assert grid[0] >= max(times[0], times[0] + 1e-4) - 1e-15 and grid[-1] <= times[-1] + 1e-15
+
+
+def test_write_bag_takes_the_gear_ratio_from_the_sidecar(tmp_path):
+    other = PROTOTYPE.__class__(l=1.2, b=0.8, a=0.05, r=0.1, i_G=10.0, name="other")
+    log = smooth_log()
+    log = Log(None, log.frame, {"platform": other.to_dict()})
+    bag = write_bag(log, tmp_path / "bag", EXAMPLE)  # mapping as a file, platform from the sidecar
+    with_other = load_log(bag, EXAMPLE, other)
+    with_proto = load_log(bag, EXAMPLE)
+    np.testing.assert_allclose(with_other.torque, log.torque, atol=1e-12)
+    np.testing.assert_allclose(with_proto.torque, log.torque * 10.0 / 25.0, atol=1e-12)
+    np.testing.assert_allclose(with_proto.beta, log.beta, atol=1e-12)  # wheel side in this mapping: no i_G

@@ -56,7 +56,7 @@ def test_inspect_reports_segments_and_modes(tmp_path):
 def test_convert_bag_then_inspect(tmp_path):
     mapping = MAPPINGS / "ros2_control.yaml"
     log = Log.from_frame(mode_log())
-    bag = write_bag(log, tmp_path / "bag", read_mapping(mapping), "mcap", geometry=PROTOTYPE)
+    bag = write_bag(log, tmp_path / "bag", read_mapping(mapping), "mcap", platform=PROTOTYPE)
     out = tmp_path / "run.parquet"
     result = runner.invoke(app, ["convert", str(bag), "--mapping", str(mapping), "--out", str(out)])
     assert result.exit_code == 0, result.output

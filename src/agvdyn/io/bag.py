@@ -31,7 +31,7 @@ from agvdyn.io._convert import (
 )
 from agvdyn.io.log import MAX_GAP_SAMPLES, Log, LogError, check_frame
 from agvdyn.io.mapping import HEADING_QUANTITIES, InputKind, LogMapping, MappingError, Stamps
-from agvdyn.platform import Geometry
+from agvdyn.platform import PROTOTYPE, Geometry, read_platform
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Suffixes of single-file bag storages; a bag directory holds metadata.yaml.
@@ -246,10 +246,10 @@ def read_bag(
 def write_bag(
     log: Log,
     path: str | os.PathLike,
-    mapping: LogMapping,
+    mapping: LogMapping | str | os.PathLike,
     storage: Storage = "sqlite3",
     *,
-    geometry: Geometry,
+    platform: Geometry | str | os.PathLike | None = None,
     start_ns: int = 1_700_000_000_000_000_000,
 ) -> Path:
     """Write a log as a ROS 2 bag of JointState messages named as in ``mapping``.
@@ -265,14 +265,26 @@ def write_bag(
     ----------
     log : the log to write.
     path : bag directory to create.
-    mapping : a mapping with ``input: ros2_bag``.
+    mapping : a :class:`LogMapping` with ``input: ros2_bag``, or the path of a mapping file.
     storage : ``"sqlite3"`` or ``"mcap"``.
-    geometry : platform whose ``i_G`` converts gear sides.
+    platform : Geometry or platform file whose ``i_G`` converts gear sides; None: the platform
+        recorded in the log's sidecar, else the prototype.
     start_ns : absolute stamp of ``t = 0``.
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
+    from agvdyn.io.log import sidecar_platform
+    from agvdyn.io.mapping import read_mapping
+
     path = Path(path)
+    if not isinstance(mapping, LogMapping):
+        mapping = read_mapping(mapping)
+    if isinstance(platform, Geometry):
+        geometry = platform
+    elif platform is not None:
+        geometry = read_platform(platform)
+    else:
+        geometry = sidecar_platform(log) or PROTOTYPE
     if mapping.input is not InputKind.ROS2_BAG:
         raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}: writing a bag needs input: ros2_bag")
     plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
