@@ -322,3 +322,23 @@ def test_write_bag_takes_the_gear_ratio_from_the_sidecar(tmp_path):
     np.testing.assert_allclose(with_other.torque, log.torque, atol=1e-12)
     np.testing.assert_allclose(with_proto.torque, log.torque * 10.0 / 25.0, atol=1e-12)
     np.testing.assert_allclose(with_proto.beta, log.beta, atol=1e-12)  # wheel side in this mapping: no i_G
+
+
+def test_upsampling_a_slow_bag_keeps_the_source_interval_as_gap_limit(tmp_path):
+    """A 100 Hz bag resampled at 500 Hz: gaps are judged against the 10 ms source interval."""
+    path = tmp_path / "slow"
+    rng = np.random.default_rng(2)
+    stamps = START_NS + np.arange(200) * 10_000_000 + rng.integers(-1_000_000, 1_000_000, 200)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=TS)
+        for ns in stamps:
+            s = (ns - START_NS) / 1e9
+            pos = [alpha_l(s), -alpha_l(s), alpha_r(s), -alpha_r(s), *(wheel_angle(s, k) for k in range(4))]
+            eff = [np.nan] * 4 + [wheel_torque(s, k) for k in range(4)]
+            writer.write(conn, int(ns), TS.serialize_cdr(joint_state(int(ns), STEERING + WHEELS, pos, eff), "sensor_msgs/msg/JointState"))
+    data = read_mapping(EXAMPLE).to_dict()
+    data["rate"] = 500.0
+    log = load_log(path, mapping_from_dict(data))
+    assert log.sample_time == pytest.approx(0.002)
+    assert log.sidecar["conversion"]["max_gap"] == pytest.approx(0.05, rel=1e-3)
+    assert_matches_source(log, np.diff(stamps).max() / 1e9)

@@ -167,7 +167,8 @@ def read_bag(
     ------
     LogError
         Missing topic, wrong message type, missing joint or field, stamps that do not increase
-        for a joint, gaps longer than ``mapping.max_gap`` (default 5 periods), mirror coupling violated.
+        for a joint, gaps longer than ``mapping.max_gap`` (default 5 nominal intervals of the source or
+        of the time base, whichever is longer), mirror coupling violated.
     """
     path = Path(path)
     if mapping.input is not InputKind.ROS2_BAG:
@@ -212,11 +213,11 @@ def read_bag(
             raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}): fewer than 2 finite {sig.field} values")
         raw_series[sig.quantity] = (t_ns[ok], sig.to_si(vals[ok], geometry.i_G))
 
+    source_ns = float(np.median([_message_interval(t) for t, _ in raw_series.values()]))
     if mapping.rate is not None:
         period_ns = int(round(1e9 / mapping.rate))
     else:
-        estimates = [_message_interval(t) for t, _ in raw_series.values()]
-        period_ns = int(round(float(np.median(estimates)) / 1000.0)) * 1000  # rounded to 1 us
+        period_ns = int(round(source_ns / 1000.0)) * 1000  # rounded to 1 us
         if period_ns <= 0:
             raise LogError(f"{path}: cannot infer a sample rate from the stamps; set 'rate' in the mapping")
     t0_ns = max(int(t[0]) for t, _ in raw_series.values())
@@ -225,7 +226,8 @@ def read_bag(
         t_ns, v = raw_series[sig.quantity]
         series[sig.quantity] = Series(f"joint {sig.source!r} {sig.field} ({sig.quantity})", (t_ns - t0_ns) / 1e9, v)
     period = period_ns / 1e9
-    max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * period
+    # Default: 5 nominal intervals of the source or of the time base, whichever is longer.
+    max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, source_ns / 1e9)
     t = uniform_grid(series, period)
     signals = resample(series, t, max_gap, str(path), f" (log time; 0 = {time_kind} {t0_ns} ns)")
     segments = segments_from_ranges(t, mapping.segments) if isinstance(mapping.segments, tuple) else None

@@ -88,7 +88,8 @@ def read_mapped_table(
                         "time_column": mapping.time_column, "time_unit": mapping.time_unit.value}
     if mapping.rate is not None:
         period = 1.0 / mapping.rate
-        max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * period
+        # Default: 5 nominal intervals of the source rows or of the time base, whichever is longer.
+        max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, float(np.median(dt)))
         series = {q: Series(f"column {mapping.signal(q).source!r} ({q})", t_src, v) for q, v in signals.items()}
         t = uniform_grid(series, period)
         signals = resample(series, t, max_gap, str(path))
