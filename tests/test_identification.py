@@ -106,7 +106,12 @@ def test_only_straight_motion_is_refused_naming_parameters():
     with pytest.raises(UnidentifiableError) as info:
         identify(Log.from_frame(frame), PROTOTYPE)
     names = [d.name for d in info.value.dependencies]
-    assert names == ["C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "C_ch"]
+    # straight motion sees only the sum of the four motor offsets: three of them are named too
+    assert names[:7] == ["C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "C_ch"]
+    assert len(names) == 10 and all(n.startswith("offset_") for n in names[7:])
+    with pytest.raises(UnidentifiableError) as info:
+        identify(Log.from_frame(frame), PROTOTYPE, settings=IdentificationSettings(torque_offsets=False))
+    assert [d.name for d in info.value.dependencies] == ["C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "C_ch"]
     message = str(info.value)
     assert "steer_left" in message and "rotation (mode 4)" in message
 
@@ -189,3 +194,20 @@ def test_mode_violation_names_segment(model_data):
     frame.loc[rows, "alpha_l"] = 0.3  # steering far from the straight configuration
     with pytest.raises(ValueError, match=r"segment 'straight' \(mode 2s\)"):
         identify(Log.from_frame(frame), PROTOTYPE)
+
+
+def test_motor_torque_offsets_are_estimated(model_data):
+    """Constant offsets on the measured motor torques: estimated as nuisance parameters (default);
+    ignoring them (the paper's model) biases the friction parameters."""
+    frame = model_data[0].copy()
+    offsets = np.array([0.03, -0.02, 0.01, 0.025])  # N m, motor side (about 15 % of the wheel Coulomb torque)
+    frame[["m_fl", "m_rl", "m_fr", "m_rr"]] += offsets
+    log = Log.from_frame(frame)
+    ident = identify(log, PROTOTYPE)
+    assert _rel_error(ident).max() < 1e-4
+    assert ident.offset_vector == pytest.approx(offsets, abs=1e-6)
+    assert set(ident.offsets_std) == {"offset_fl", "offset_rl", "offset_fr", "offset_rr"}
+    assert 1.0 < ident.condition_number < ident.condition_number_with_offsets
+    plain = identify(log, PROTOTYPE, settings=IdentificationSettings(torque_offsets=False))
+    assert _rel_error(plain).max() > 1e-2
+    assert plain.offsets == {} and plain.offset_vector is None

@@ -78,6 +78,9 @@ __all__ = [
 #: Parameters taken as known by default (eq. 24): B_w from a single-axis test (sec. 7).
 DEFAULT_FIXED: Mapping[str, float] = MappingProxyType({"B_w": 0.121})
 
+#: Names of the motor-torque offsets (nuisance parameters, motor side, N m).
+OFFSET_NAMES = ("offset_fl", "offset_rl", "offset_fr", "offset_rr")
+
 #: Which experiment excites each parameter (Table 1, PLATFORM.md segment names).
 EXCITATION: Mapping[str, str] = MappingProxyType({
     "C_l": "steer_left (mode 1: steering the left wheel set at rest)",
@@ -91,12 +94,20 @@ EXCITATION: Mapping[str, str] = MappingProxyType({
     "d_vw": "straight, lateral or rotation",
     "d_cw": "straight, lateral or rotation",
     "B_w": "a car-like steered motion (mode 2, e.g. lane_change), or fix it from a single-axis test (--fix B_w=...)",
+    **dict.fromkeys(OFFSET_NAMES, "the four identification segments together (steer_left, steer_right, straight and "
+                                  "rotation each see another combination of the motor offsets), or no offset "
+                                  "estimation (--no-offsets)"),
 })
 
 #: Order in which the rank check accepts columns: the representative the paper names for each
 #: group of parameters that multiply the same signal comes first (Table 1: C_ch in rotation,
 #: m_ch in straight motion), B_w last (the paper's dependent parameter p_2, sec. 6.3).
-_RANK_ORDER = ("m_ch", "C_ch", "d_vw", "d_cw", "C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "B_w")
+_RANK_ORDER = ("m_ch", "C_ch", "d_vw", "d_cw", "C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "B_w", *OFFSET_NAMES)
+
+
+#: Generalized coordinates of the steering (eq. 10, 11) and of the chassis (eq. 11-13).
+STEERING_COORDINATES = ("alpha_l", "alpha_r", "alpha_v")
+CHASSIS_COORDINATES = ("x_ch", "y_ch", "gamma_ch")
 
 
 class Filtering(str, Enum):
@@ -123,8 +134,13 @@ class IdentificationSettings:
     filtering : Filtering
         PARALLEL (default) or LITERAL, see :class:`Filtering`.
     stiction_threshold : float
-        Rows whose generalized velocity ``|s_dot_k,i|`` is below this are dropped (sec. 7); in
-        the unit of the coordinate (rad/s for steering and rotation, m/s for x_ch, y_ch).
+        Rows of the chassis coordinates (x_ch, y_ch in m/s, gamma_ch in rad/s) whose generalized
+        velocity ``|s_dot_k,i|`` is below this are dropped (sec. 7).
+    steering_threshold : float
+        The same for the steering coordinates (alpha_l, alpha_r, alpha_v), rad/s. Larger by
+        default: the steering torque is dominated by Coulomb friction (13-17 N m against about
+        1 N m of inertia torque), and the rows around a velocity reversal, where the acceleration
+        that excites C_l, C_r is largest, are where stick/slip and wheel slip break the tanh model.
     mode_tolerance : float
         Tolerance (rad) of the mode relations (eq. 9) when the rows of a run are projected.
     epsilon : float
@@ -136,6 +152,11 @@ class IdentificationSettings:
         size below this orthogonal to the columns accepted before it.
     sample_jitter : float
         Largest relative deviation of a time step from the median inside a run.
+    torque_offsets : bool
+        Estimate a constant offset of each motor-torque measurement (motor side, N m) together
+        with p, as four nuisance parameters shared by all logs of the identification (one
+        recording session). Their columns are ``H_k^T B e_i``, so the offsets are exact in every
+        mode. False: the paper's model without offsets. See docs/identification.md.
     rest_speed : float
         Logs without ``segment`` column: a row whose wheel surface speed not explained by
         steering is below this (m/s) is taken as mode 1 (at rest), see ``_detected_labels``.
@@ -144,6 +165,8 @@ class IdentificationSettings:
     filter: FilterSettings = FilterSettings()
     filtering: Filtering = Filtering.PARALLEL
     stiction_threshold: float = 0.05
+    steering_threshold: float = 0.1
+    torque_offsets: bool = True
     mode_tolerance: float = MODE_TOLERANCE
     epsilon: float = EPSILON
     segments: tuple[str, ...] | None = None
@@ -153,7 +176,7 @@ class IdentificationSettings:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "filtering", Filtering(self.filtering))
-        for key in ("stiction_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter",
+        for key in ("stiction_threshold", "steering_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter",
                     "rest_speed"):
             value = getattr(self, key)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
@@ -163,6 +186,11 @@ class IdentificationSettings:
         if self.segments is not None:
             object.__setattr__(self, "segments", tuple(str(s) for s in self.segments))
 
+    def thresholds(self) -> dict[str, float]:
+        """Stiction threshold of each generalized coordinate name."""
+        steering = dict.fromkeys(STEERING_COORDINATES, self.steering_threshold)
+        return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_threshold), **steering}
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "filter_cutoff_rad_s": self.filter.cutoff,
@@ -170,10 +198,12 @@ class IdentificationSettings:
             "derivative": self.filter.derivative.value,
             "filtering": self.filtering.value,
             "stiction_threshold": self.stiction_threshold,
+            "steering_threshold": self.steering_threshold,
             "mode_tolerance": self.mode_tolerance,
             "epsilon": self.epsilon,
             "segments": None if self.segments is None else list(self.segments),
             "rank_tolerance": self.rank_tolerance,
+            "torque_offsets": self.torque_offsets,
             "rest_speed": self.rest_speed,
         }
 
@@ -191,6 +221,8 @@ class EquationBlock:
     torque : (n, n_k) ``H_k^T B u`` as used in the regression.
     s_dot : (n, n_k) generalized velocities (eq. 10-13).
     keep : (n, n_k) rows kept after the stiction mask.
+    offset_regressor : (n, n_k, 4) ``H_k^T B e_i``: generalized torques of a unit offset of each
+        motor-torque measurement (filtered like the regressor).
     """
 
     source: str
@@ -201,14 +233,19 @@ class EquationBlock:
     torque: np.ndarray
     s_dot: np.ndarray
     keep: np.ndarray
+    offset_regressor: np.ndarray
 
     @property
     def coordinates(self) -> tuple[str, ...]:
         return self.mode.coordinates
 
-    def model_torque(self, p: np.ndarray) -> np.ndarray:
-        """Model generalized torques ``H_k^T Theta p`` (n, n_k)."""
-        return self.regressor @ np.asarray(p, dtype=float)
+    def model_torque(self, p: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
+        """Model generalized torques ``H_k^T Theta p`` (n, n_k), plus ``H_k^T B o`` of motor-torque
+        offsets ``o`` (4,) when given (the model of the *measured* torques)."""
+        out = self.regressor @ np.asarray(p, dtype=float)
+        if offsets is not None:
+            out = out + self.offset_regressor @ np.asarray(offsets, dtype=float)
+        return out
 
 
 def _generalized_velocity(H: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
@@ -222,12 +259,13 @@ def _generalized_velocity(H: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
 
 def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_dot: np.ndarray,
                    q_ddot: np.ndarray, u: np.ndarray, *, t: np.ndarray | None = None, segment: str = "",
-                   source: str = "", stiction_threshold: float = 0.0, epsilon: float = EPSILON,
+                   source: str = "", stiction_threshold: float | Mapping[str, float] = 0.0, epsilon: float = EPSILON,
                    mode_tolerance: float = MODE_TOLERANCE) -> EquationBlock:
     """Rows ``H_k^T Theta(q, q_dot, q_ddot)`` and ``H_k^T B u`` of eq. (19) from given joint motion.
 
     No filtering: the signals are used as given (exact model signals, or already filtered
-    measurements). Rows with ``|s_dot| < stiction_threshold`` are marked not kept.
+    measurements). Rows with ``|s_dot| < stiction_threshold`` are marked not kept; the threshold
+    is one number or one per coordinate name (``mode.coordinates``).
     """
     mode = Mode.from_label(mode)
     alpha = np.asarray(alpha, dtype=float)
@@ -240,9 +278,14 @@ def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_do
         where = f"{source}: " if source else ""
         raise ValueError(f"{where}segment {segment!r} (mode {mode.label}): {exc}") from exc
     s_dot = _generalized_velocity(H, np.asarray(q_dot, dtype=float))
+    unit = np.eye(4)
+    offset = np.stack([projected_input(geometry, mode, alpha, np.broadcast_to(unit[i], (n, 4)),
+                                       tolerance=mode_tolerance) for i in range(4)], axis=2)
+    if isinstance(stiction_threshold, Mapping):
+        stiction_threshold = np.array([stiction_threshold[c] for c in mode.coordinates])
     keep = stiction_mask(s_dot, stiction_threshold)
     t = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
-    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep)
+    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep, offset)
 
 
 def _segment_runs(log: Any, settings: IdentificationSettings) -> list[tuple[int, int, str, str]] | None:
@@ -330,12 +373,15 @@ def _run_block(geometry: Geometry, mode: Mode, t: np.ndarray, kin: _Kinematics, 
     q_ddot = np.concatenate([chassis_dd, kin.alpha_ddot[sl], kin.beta_ddot[sl]], axis=1)
     u_used = lowpass(u, kin.dt, settings.filter) if settings.filtering is Filtering.LITERAL else u
     block = equation_block(geometry, mode, a, q_dot, q_ddot, u_used, t=t, segment=segment, source=source,
-                           stiction_threshold=settings.stiction_threshold, epsilon=settings.epsilon,
+                           stiction_threshold=settings.thresholds(), epsilon=settings.epsilon,
                            mode_tolerance=settings.mode_tolerance)
     if settings.filtering is Filtering.PARALLEL:
         Y = parallel_filter(block.regressor, kin.dt, settings.filter)
         tau = parallel_filter(block.torque, kin.dt, settings.filter)
-        block = EquationBlock(source, segment, mode, t, Y, tau, block.s_dot, block.keep)
+        offset = block.offset_regressor
+        if mode is Mode.CAR_LIKE:  # constant in the other modes, where filtering leaves it unchanged
+            offset = parallel_filter(offset, kin.dt, settings.filter)
+        block = EquationBlock(source, segment, mode, t, Y, tau, block.s_dot, block.keep, offset)
     return block
 
 
@@ -379,12 +425,21 @@ def log_equations(log: Any, geometry: Geometry, settings: IdentificationSettings
     return blocks, notes
 
 
-def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Stacked regressor ``Theta_hat`` (m, 11) and right-hand side ``tau_hat`` (m,) of eq. (22)."""
+def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True, offsets: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Stacked regressor ``Theta_hat`` (m, 11) and right-hand side ``tau_hat`` (m,) of eq. (22).
+
+    ``offsets``: four more columns ``H_k^T B e_i`` for the motor-torque offsets (m, 15).
+    """
+    width = N_P + (4 if offsets else 0)
     if not blocks:
-        return np.zeros((0, N_P)), np.zeros(0)
-    A = [b.regressor.reshape(-1, N_P)[b.keep.ravel()] if kept_only else b.regressor.reshape(-1, N_P)
-         for b in blocks]
+        return np.zeros((0, width)), np.zeros(0)
+
+    def columns(b: EquationBlock) -> np.ndarray:
+        full = np.concatenate([b.regressor, b.offset_regressor], axis=2) if offsets else b.regressor
+        return full.reshape(-1, width)
+
+    A = [columns(b)[b.keep.ravel()] if kept_only else columns(b) for b in blocks]
     y = [b.torque.ravel()[b.keep.ravel()] if kept_only else b.torque.ravel() for b in blocks]
     return np.concatenate(A), np.concatenate(y)
 
@@ -548,6 +603,9 @@ class Identification:
         (the paper's 11.56); ``condition_number_unscaled`` of ``Theta_1^T Theta_1``.
     residual_rms : RMS of ``tau - Theta p`` over the kept rows, per ``"segment:coordinate"``.
     blocks : the equation blocks (Fig. 5 data), ``notes``: runs skipped and why.
+    offsets, offsets_std : estimated motor-torque offsets (motor side, N m) when
+        ``settings.torque_offsets``; the model torques of Fig. 5 include them.
+        ``condition_number_with_offsets``: cond of the scaled regressor with the offset columns.
     """
 
     parameters: Parameters
@@ -564,6 +622,14 @@ class Identification:
     sources: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     estimator: str = "LeastSquares"
+    offsets: dict[str, float] = field(default_factory=dict)
+    offsets_std: dict[str, float] = field(default_factory=dict)
+    condition_number_with_offsets: float = float("nan")
+
+    @property
+    def offset_vector(self) -> np.ndarray | None:
+        """Motor-torque offsets (4,) in wheel order, None when they were not estimated."""
+        return np.array([self.offsets[n] for n in OFFSET_NAMES]) if self.offsets else None
 
     def to_frame(self) -> pd.DataFrame:
         """Parameter table: value, std, relative std, unit, fixed; index = parameter name."""
@@ -581,7 +647,7 @@ class Identification:
         p = self.parameters.to_vector()
         frames = []
         for b in self.blocks:
-            model = b.model_torque(p)
+            model = b.model_torque(p, self.offset_vector)
             for j, coord in enumerate(b.coordinates):
                 frames.append(pd.DataFrame({
                     "source": b.source, "segment": b.segment, "mode": b.mode.label, "coordinate": coord,
@@ -598,6 +664,7 @@ class Identification:
             "settings": self.settings.to_dict(),
             "platform": self.geometry.to_dict(),
             "sources": list(self.sources),
+            "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
         }
         return ParameterFile(self.parameters, dict(self.std), self.fixed, self.condition_number, extra)
 
@@ -611,8 +678,11 @@ class Identification:
             "parameters": {n: {"value": getattr(self.parameters, n), "std": self.std.get(n)} for n in PARAMETER_NAMES},
             "condition_number": self.condition_number,
             "condition_number_unscaled": self.condition_number_unscaled,
+            "condition_number_with_offsets": (None if not math.isfinite(self.condition_number_with_offsets)
+                                              else self.condition_number_with_offsets),
             "fixed": list(self.fixed),
             "residual_rms": dict(self.residual_rms),
+            "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
             "n_rows": self.n_rows,
             "n_samples": self.n_samples,
             "filtering": self.settings.filtering.value,
@@ -661,12 +731,13 @@ def _check_fixed(fixed: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
-def _residual_rms(blocks: Sequence[EquationBlock], p: np.ndarray) -> dict[str, float]:
+def _residual_rms(blocks: Sequence[EquationBlock], p: np.ndarray, offsets: np.ndarray | None = None
+                  ) -> dict[str, float]:
     """RMS of tau - Theta p over the kept rows per "segment:coordinate" (runs of equal name pooled);
     coordinates with no kept row (e.g. the resting side while the other one steers) are left out."""
     sums: dict[str, list[float]] = {}
     for b in blocks:
-        r = b.torque - b.model_torque(p)
+        r = b.torque - b.model_torque(p, offsets)
         for j, coord in enumerate(b.coordinates):
             sel = r[b.keep[:, j], j]
             if sel.size:
@@ -683,12 +754,14 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     check naming what is not excited, scaled least squares (eq. 25)."""
     fixed = _check_fixed(fixed)
     blocks = tuple(blocks)
-    A, y = stacked_system(blocks)
-    free = [n for n in PARAMETER_NAMES if n not in fixed]
-    idx_free = [PARAMETER_NAMES.index(n) for n in free]
-    p_fixed = np.zeros(N_P)
+    with_offsets = settings.torque_offsets
+    A, y = stacked_system(blocks, offsets=with_offsets)
+    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else [])
+    free = [n for n in names if n not in fixed]
+    idx_free = [names.index(n) for n in free]
+    p_fixed = np.zeros(len(names))
     for name, value in fixed.items():
-        p_fixed[PARAMETER_NAMES.index(name)] = value
+        p_fixed[names.index(name)] = value
     if A.shape[0] <= len(free):
         raise UnidentifiableError(
             [Dependency(n, (), 0.0) for n in free],
@@ -699,18 +772,37 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     if missing:
         raise UnidentifiableError(missing)
     est = (estimator if estimator is not None else LeastSquares()).fit(A1, y1)
-    p = p_fixed.copy()
-    p[idx_free] = est.coef_
-    std = dict(zip(free, est.std_.tolist()))
-    residual_rms = _residual_rms(blocks, p)
+    # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
+    # columns are reported separately
+    param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]
+    if len(param_cols) < len(free):
+        cond_with_offsets = float(est.condition_number_)
+        R = _triangular_factor(A1[:, param_cols] / _column_norms(A1[:, param_cols]))
+        sv = np.linalg.svd(R, compute_uv=False)
+        cond = float((sv[0] / sv[-1]) ** 2)
+        sv_raw = np.linalg.svd(R * _column_norms(A1[:, param_cols]), compute_uv=False)
+        cond_unscaled = float((sv_raw[0] / sv_raw[-1]) ** 2)
+    else:
+        cond = float(est.condition_number_)
+        cond_unscaled = float(getattr(est, "condition_number_unscaled_", float("nan")))
+        cond_with_offsets = float("nan")
+    theta = p_fixed.copy()
+    theta[idx_free] = est.coef_
+    p = theta[:N_P]
+    offsets = theta[N_P:] if with_offsets else None
+    all_std = dict(zip(free, est.std_.tolist()))
+    std = {n: v for n, v in all_std.items() if n in PARAMETER_NAMES}
+    residual_rms = _residual_rms(blocks, p, offsets)
     return Identification(
         parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
-        condition_number=float(est.condition_number_),
-        condition_number_unscaled=float(getattr(est, "condition_number_unscaled_", float("nan"))),
+        condition_number=cond, condition_number_unscaled=cond_unscaled,
+        condition_number_with_offsets=cond_with_offsets,
         residual_rms=residual_rms, n_rows=int(A.shape[0]),
         n_samples=int(n_samples if n_samples is not None else sum(b.t.size for b in blocks)),
         blocks=blocks, settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
-        estimator=type(est).__name__)
+        estimator=type(est).__name__,
+        offsets={} if offsets is None else dict(zip(OFFSET_NAMES, offsets.tolist())),
+        offsets_std={n: all_std[n] for n in OFFSET_NAMES if n in all_std})
 
 
 def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,

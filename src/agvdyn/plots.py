@@ -27,11 +27,11 @@ def _new_figure(width: float, height: float) -> Figure:
     return fig
 
 
-def _panels(blocks, p, *, kept_only: bool):
+def _panels(blocks, p, *, kept_only: bool, offsets=None):
     """(title, t, measured, model, kept) per segment and coordinate, runs of one segment joined."""
     panels: dict[str, list] = {}
     for b in blocks:
-        model = b.model_torque(p)
+        model = b.model_torque(p, offsets)
         for j, coord in enumerate(b.coordinates):
             if kept_only and not b.keep[:, j].any():
                 continue  # e.g. the resting side while the other side steers
@@ -57,8 +57,9 @@ def _draw(ax, t, measured, model, kept, *, mask_stiction: bool) -> None:
     ax.grid(True, lw=0.3)
 
 
-def _torque_figure(blocks, p, title: str, *, mask_stiction: bool, scores: dict[str, str] | None = None) -> Figure:
-    panels = _panels(blocks, p, kept_only=mask_stiction)
+def _torque_figure(blocks, p, title: str, *, mask_stiction: bool, scores: dict[str, str] | None = None,
+                   offsets=None) -> Figure:
+    panels = _panels(blocks, p, kept_only=mask_stiction, offsets=offsets)
     n = max(1, len(panels))
     cols = 1 if n == 1 else 2
     rows = int(np.ceil(n / cols))
@@ -82,11 +83,12 @@ def _torque_figure(blocks, p, title: str, *, mask_stiction: bool, scores: dict[s
 
 
 def identification_figure(identification) -> Figure:
-    """Fig. 5: measured vs model generalized torques of each identification segment (kept rows)."""
+    """Fig. 5: measured vs model generalized torques of each identification segment (kept rows);
+    the model includes the estimated motor-torque offsets when there are any."""
     scores = {k: f"residual RMS {v:.3g}" for k, v in identification.residual_rms.items()}
     return _torque_figure(identification.blocks, identification.parameters.to_vector(),
                           "Identification experiment: generalized torques (cf. Fig. 5)",
-                          mask_stiction=True, scores=scores)
+                          mask_stiction=True, scores=scores, offsets=identification.offset_vector)
 
 
 def validation_figure(validation) -> Figure:

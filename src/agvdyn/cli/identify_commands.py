@@ -46,11 +46,12 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
     return out
 
 
-def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str]) -> IdentificationSettings:
+def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
+              steering_stiction: float = 0.1, offsets: bool = True) -> IdentificationSettings:
     try:
         return IdentificationSettings(
             filter=FilterSettings(cutoff=cutoff, order=order), filtering=Filtering(filtering),
-            stiction_threshold=stiction,
+            stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
         raise fail(f"{exc} (filtering must be one of {[f.value for f in Filtering]})") from exc
@@ -87,13 +88,15 @@ def identify(
     filtering: str = typer.Option("parallel", help="parallel (filter regressor columns and torques alike) or literal (the paper's wording)."),
     cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase Butterworth low-pass, rad/s."),
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Rows with |generalized velocity| below this are dropped (rad/s or m/s)."),
+    stiction: float = typer.Option(0.05, help="Rows of x_ch, y_ch, gamma_ch with |generalized velocity| below this are dropped (m/s, rad/s)."),
+    steering_stiction: float = typer.Option(0.1, help="The same for the steering coordinates alpha_l, alpha_r, alpha_v (rad/s)."),
+    offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets with the parameters."),
     segments: Optional[str] = typer.Option(None, help="Comma-separated segment names to use; default: every segment with a mode."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file."""
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, segments)
+    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets)
     loaded, geometry = _load(logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
@@ -112,6 +115,9 @@ def identify(
     console.print(_parameter_table(ident))
     console.print("residual RMS per generalized torque: " +
                   ", ".join(f"{k} {v:.4g}" for k, v in ident.residual_rms.items()))
+    if ident.offsets:
+        console.print("motor-torque offsets (N m, motor side): " +
+                      ", ".join(f"{k} {v:+.4f} +- {ident.offsets_std[k]:.2g}" for k, v in ident.offsets.items()))
     for note in ident.notes:
         console.print(f"note: {note}")
     console.print(f"wrote {written}")
@@ -130,13 +136,14 @@ def validate(
     filtering: str = typer.Option("parallel", help="parallel or literal, as for identify."),
     cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase low-pass, rad/s."),
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Stiction threshold on the generalized velocities."),
+    stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
+    steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
     from agvdyn.validation import validate as validate_log
 
-    settings = _settings(filtering, cutoff, order, stiction, None)
+    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction)
     (loaded,), geometry = _load([log], mapping, platform)
     try:
         parameters = read_parameters(params).parameters
@@ -180,14 +187,16 @@ def report(
     filtering: str = typer.Option("parallel", help="parallel or literal."),
     cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase low-pass, rad/s."),
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Stiction threshold on the generalized velocities."),
+    stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
+    steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
+    offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets."),
 ) -> None:
     """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
     from agvdyn.report import write_report
     from agvdyn.validation import validate as validate_log
 
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, None)
+    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, offsets)
     loaded, geometry = _load(ident_logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
