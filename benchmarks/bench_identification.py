@@ -11,6 +11,12 @@ Both are fed the same filtered signals, so the ratio compares the regression sta
 end-to-end time (load, filters, odometry, regression) is printed too.
 
 Run: ``.venv/bin/python benchmarks/bench_identification.py [--minutes 30]``.
+
+``--acceptance``: instead, the acceptance of issue 4 on the project's simulator: identification
+and lane-change logs simulated with Table 2 as the truth and sensor noise on, for several seeds,
+with the simulator's neglected effects off (``PlantSettings().ideal()``) and on (defaults);
+prints per parameter the deviation in % and in standard deviations and whether it is within
+5 % or 3 std, and the lane-change NRMSE, for parallel and literal filtering.
 """
 from __future__ import annotations
 
@@ -58,11 +64,42 @@ def naive_rows(geometry, block_inputs, n_per_segment: int):
     return np.array(rows), np.array(rhs)
 
 
+def acceptance(seeds: list[int]) -> None:
+    """Identification on simulated logs against the simulator's truth (Table 2)."""
+    from agvdyn.io import Log  # noqa: PLC0415
+    from agvdyn.report import parameter_table  # noqa: PLC0415
+    from agvdyn.simulation import PlantSettings, SimulationSettings, simulate  # noqa: PLC0415
+    from agvdyn.validation import validate  # noqa: PLC0415
+
+    for label, plant in (("neglected effects off", PlantSettings().ideal()), ("neglected effects on", PlantSettings())):
+        settings = SimulationSettings(plant=plant)
+        for seed in seeds:
+            ident_sim = simulate("identification", settings=settings, seed=seed)
+            lane_sim = simulate("lane-change", settings=settings, seed=seed + 1000)
+            ident_log = Log.from_frame(ident_sim.log_frame(), sidecar=ident_sim.sidecar())
+            lane_log = Log.from_frame(lane_sim.log_frame(), sidecar=lane_sim.sidecar())
+            for filtering in ("parallel", "literal"):
+                ident = identify(ident_log, settings=IdentificationSettings(filtering=filtering))
+                table = parameter_table(ident, PAPER_PARAMETERS, {}).drop(index="B_w")
+                val = validate(lane_log, ident.parameters, settings=IdentificationSettings(filtering=filtering))
+                cells = " ".join(f"{n} {row.deviation_pct:+.1f}%/{row.deviation_in_std:.1f}s{'' if row.ok else '!'}"
+                                 for n, row in table.iterrows())
+                nrmse = " ".join(f"{k.split(':')[1]} {v:.3f}/{val.nrmse_moving[k]:.3f}" for k, v in val.nrmse.items())
+                print(f"{label}, seed {seed}, {filtering}: {int(table.ok.sum())}/10 ok, cond {ident.condition_number:.2f}")
+                print(f"   {cells}")
+                print(f"   lane-change NRMSE all/without stiction: {nrmse}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--minutes", type=float, default=30.0, help="log duration (default 30)")
     parser.add_argument("--naive-samples", type=int, default=5000, help="per-sample loop: samples per segment")
+    parser.add_argument("--acceptance", action="store_true", help="run the acceptance on simulated logs instead")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds of the acceptance runs")
     args = parser.parse_args()
+    if args.acceptance:
+        acceptance(args.seeds)
+        return
     seconds = args.minutes * 60 / 4
     durations = {name: seconds for name in ("steer_left", "steer_right", "straight", "rotation")}
     frame, _ = identification_frame(durations, repeats=max(1, int(seconds // 30)))
