@@ -45,6 +45,7 @@ from agvdyn.platform import (
 from agvdyn.signals import (
     FilterSettings,
     filtered_derivatives,
+    guarded_mask,
     lowpass,
     modes_from_segments,
     parallel_filter,
@@ -152,6 +153,11 @@ class IdentificationSettings:
         size below this orthogonal to the columns accepted before it.
     sample_jitter : float
         Largest relative deviation of a time step from the median inside a run.
+    stiction_guard : float
+        Rows within ``stiction_guard / filter.cutoff`` seconds of a stiction row (or of the end
+        of a run) are dropped too (2 / omega_g = 50 ms by default): the zero-phase filter
+        spreads each sample over about that time, so their filtered values carry the low-speed
+        effects the model does not describe. 0 switches it off.
     torque_offsets : bool
         Estimate a constant offset of each motor-torque measurement (motor side, N m) together
         with p, as four nuisance parameters shared by all logs of the identification (one
@@ -167,6 +173,7 @@ class IdentificationSettings:
     stiction_threshold: float = 0.05
     steering_threshold: float = 0.1
     torque_offsets: bool = True
+    stiction_guard: float = 2.0
     mode_tolerance: float = MODE_TOLERANCE
     epsilon: float = EPSILON
     segments: tuple[str, ...] | None = None
@@ -176,7 +183,7 @@ class IdentificationSettings:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "filtering", Filtering(self.filtering))
-        for key in ("stiction_threshold", "steering_threshold", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter",
+        for key in ("stiction_threshold", "steering_threshold", "stiction_guard", "mode_tolerance", "epsilon", "rank_tolerance", "sample_jitter",
                     "rest_speed"):
             value = getattr(self, key)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
@@ -204,6 +211,7 @@ class IdentificationSettings:
             "segments": None if self.segments is None else list(self.segments),
             "rank_tolerance": self.rank_tolerance,
             "torque_offsets": self.torque_offsets,
+            "stiction_guard": self.stiction_guard,
             "rest_speed": self.rest_speed,
         }
 
@@ -375,6 +383,10 @@ def _run_block(geometry: Geometry, mode: Mode, t: np.ndarray, kin: _Kinematics, 
     block = equation_block(geometry, mode, a, q_dot, q_ddot, u_used, t=t, segment=segment, source=source,
                            stiction_threshold=settings.thresholds(), epsilon=settings.epsilon,
                            mode_tolerance=settings.mode_tolerance)
+    guard = int(round(settings.stiction_guard / settings.filter.cutoff / kin.dt))
+    if guard:
+        block = EquationBlock(source, segment, mode, t, block.regressor, block.torque, block.s_dot,
+                              guarded_mask(block.keep, guard), block.offset_regressor)
     if settings.filtering is Filtering.PARALLEL:
         Y = parallel_filter(block.regressor, kin.dt, settings.filter)
         tau = parallel_filter(block.torque, kin.dt, settings.filter)

@@ -36,6 +36,7 @@ __all__ = [
     "parallel_filter",
     "runs",
     "stiction_mask",
+    "guarded_mask",
     "SEGMENT_MODES",
     "IDENTIFICATION_SEGMENTS",
     "modes_from_segments",
@@ -213,6 +214,32 @@ def stiction_mask(s_dot: np.ndarray, threshold: float | np.ndarray) -> np.ndarra
     if np.any(threshold < 0) or not np.all(np.isfinite(threshold)):
         raise ValueError(f"stiction threshold {threshold}: expected finite values >= 0")
     return np.abs(s_dot) >= threshold
+
+
+def guarded_mask(keep: np.ndarray, guard: int, *, axis: int = 0) -> np.ndarray:
+    """``keep`` with every row within ``guard`` samples of a dropped row (or of an end) dropped too.
+
+    A zero-phase filter spreads each sample over about ``2 / omega_g`` on both sides, so rows next
+    to the stiction rows carry what happens at low speed (stick/slip, wheel slip, the tanh
+    transition) after filtering; this removes them. O(N) by cumulative sums.
+
+    Examples
+    --------
+    >>> guarded_mask(np.array([True, True, True, False, True, True, True, True]), 1).tolist()
+    [False, True, False, False, False, True, True, False]
+    """
+    keep = np.asarray(keep, dtype=bool)
+    if guard < 0:
+        raise ValueError(f"guard={guard!r}: expected >= 0 samples")
+    if guard == 0:
+        return keep.copy()
+    moved = np.moveaxis(keep, axis, 0)
+    n = moved.shape[0]
+    bad = np.concatenate([np.ones((guard,) + moved.shape[1:], dtype=np.int64), (~moved).astype(np.int64),
+                          np.ones((guard,) + moved.shape[1:], dtype=np.int64)])
+    cs = np.concatenate([np.zeros((1,) + moved.shape[1:], dtype=np.int64), np.cumsum(bad, axis=0)])
+    window = cs[2 * guard + 1: 2 * guard + 1 + n] - cs[:n]  # bad rows in [i - guard, i + guard]
+    return np.moveaxis(window == 0, 0, axis)
 
 
 #: Mode of each named experiment phase (PLATFORM.md, log column ``segment``). ``None``: excluded.
