@@ -115,17 +115,40 @@ def _constraint_matrix(c, alpha, A):
 
 
 @njit(cache=True)
-def _coulomb_secant(c, vel, d_c):
-    """Secant coefficient tau / v of the Coulomb friction at velocity ``vel``."""
+def _coulomb(c, v, d_c):
+    """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0)."""
     mode = c[_COUL]
-    av = abs(vel)
+    av = abs(v)
     if mode == 2.0:
-        return 0.0
+        return 0.0, 0.0, 0.0
     if mode == 1.0:
-        x = av / c[_EPS]
-        return d_c / c[_EPS] if x < 1e-8 else d_c * math.tanh(x) / av
-    level = d_c * (1.0 + (c[_RATIO] - 1.0) * math.exp(-(av / c[_VSTRIB]) ** 2))
-    return level / max(av, c[_VSTICK])
+        eps = c[_EPS]
+        x = v / eps
+        f = d_c * math.tanh(x)
+        sec = d_c / eps if abs(x) < 1e-8 else f / v
+        return f, sec, d_c / eps / math.cosh(min(abs(x), 300.0)) ** 2
+    vs = c[_VSTICK]
+    e = math.exp(-(av / c[_VSTRIB]) ** 2)
+    level = d_c * (1.0 + (c[_RATIO] - 1.0) * e)
+    if av <= vs:
+        return level * v / vs, level / vs, level / vs
+    dlevel = d_c * (c[_RATIO] - 1.0) * e * (-2.0 * av / c[_VSTRIB] ** 2)
+    return level * (1.0 if v > 0 else -1.0), level / av, max(dlevel, 0.0)
+
+
+@njit(cache=True)
+def _friction_terms(c, v, d_v, d_c, inertia, dt):
+    """Linearly-implicit friction of one joint: force = d * v_new + e.
+
+    Fast joints use the tangent (Rosenbrock-Euler) linearisation, exact for a constant Coulomb
+    force; slow joints, which one step of friction could stop (|v| < 2 dt d_c / inertia), use the
+    secant, which never flips the sign of v and holds a stuck joint.
+    """
+    f, sec, slope = _coulomb(c, v, d_c)
+    v_thr = max(2.0 * dt * d_c / inertia, 3.0 * c[_VSTICK])
+    if abs(v) < v_thr:
+        return d_v + sec, 0.0
+    return d_v + slope, f - slope * v
 
 
 @njit(cache=True)
@@ -188,10 +211,11 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
                 t += A[j, p] * dvec[j] * A[j, q]
             K[p, q] = M[p, q] + dt * t
     joint_d = np.zeros(9)
-    joint_d[3] = c[_DVL] + _coulomb_secant(c, vel[3], c[_DCL])
-    joint_d[4] = c[_DVR] + _coulomb_secant(c, vel[4], c[_DCR])
+    joint_e = np.zeros(9)
+    joint_d[3], joint_e[3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], M[3, 3], dt)
+    joint_d[4], joint_e[4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], M[4, 4], dt)
     for i in range(4):
-        joint_d[5 + i] = c[_DVW] + _coulomb_secant(c, vel[5 + i], c[_DCW])
+        joint_d[5 + i], joint_e[5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], M[5 + i, 5 + i], dt)
     for q in range(3, 9):
         K[q, q] += dt * joint_d[q]
     # right-hand side M v - dt h + dt B u (+ stops)
@@ -202,6 +226,8 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
         rhs[p] = t - dt * h[p]
     for i in range(4):
         rhs[5 + i] += dt * c[_IG] * torque[i]
+    for q in range(3, 9):
+        rhs[q] -= dt * joint_e[q]
     stop_k = np.zeros(2)
     stop_pen = np.zeros(2)
     for j in range(2):
@@ -224,7 +250,7 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
             t += A[j, q] * rhs[q]
         p_diss += dvec[j] * t * t
     for q in range(3, 9):
-        p_diss += joint_d[q] * rhs[q] * rhs[q]
+        p_diss += (joint_d[q] * rhs[q] + joint_e[q]) * rhs[q]
     p_stop = 0.0
     for j in range(2):
         if stop_k[j] != 0.0:
