@@ -102,7 +102,7 @@ def main() -> None:
         return
     seconds = args.minutes * 60 / 4
     durations = {name: seconds for name in ("steer_left", "steer_right", "straight", "rotation")}
-    frame, _ = identification_frame(durations, repeats=max(1, int(seconds // 30)))
+    frame, _ = identification_frame(durations, repeats=max(1, int(seconds // 10)))  # 10 s excitation periods
     n = len(frame)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "ident.parquet"

@@ -164,3 +164,17 @@ def test_uniform_sample_time():
     t[50] += 0.5 * DT
     with pytest.raises(ValueError, match="row 50"):
         uniform_sample_time(t)
+
+
+@given(mask=st.lists(st.booleans(), min_size=1, max_size=60), guard=st.integers(0, 5))
+@settings(max_examples=60, deadline=None)
+def test_guarded_mask_matches_definition(mask, guard):
+    """Kept iff no dropped row and no end of the array within `guard` samples."""
+    from agvdyn.signals import guarded_mask
+
+    keep = np.array(mask)
+    n = keep.size
+    expected = [all(0 <= j < n and keep[j] for j in range(i - guard, i + guard + 1)) for i in range(n)]
+    assert guarded_mask(keep, guard).tolist() == expected
+    two = np.stack([keep, keep], axis=1)
+    assert guarded_mask(two, guard).tolist() == [[e, e] for e in expected]
