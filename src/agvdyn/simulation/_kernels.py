@@ -14,7 +14,8 @@ from numba import njit
 
 # Indices of the constant vector handed to the compiled code.
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
- _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _NCONST) = range(32)
+ _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
+_NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 
 
 
@@ -100,7 +101,7 @@ def _bias(c, alpha, v, out):
 def _constraint_matrix(c, alpha, A):
     """A(alpha) (8, 9) of eq. (1)-(2): rows 0-3 lateral, 4-7 longitudinal slip of fl, rl, fr, rr."""
     A[:, :] = 0.0
-    a, r = c[_A], c[_R]
+    a = c[_A]
     for i in range(4):
         side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
         ct, st = math.cos(th), math.sin(th)
@@ -111,7 +112,7 @@ def _constraint_matrix(c, alpha, A):
         A[4 + i, 1] = st
         A[4 + i, 2] = -ct * cy + st * cx - s * a
         A[4 + i, 3 + side] = -s * a * h
-        A[4 + i, 5 + i] = -r
+        A[4 + i, 5 + i] = -c[_RW + i]
 
 
 @njit(cache=True)
@@ -196,8 +197,8 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
         slip[j] = t
     mufz = c[_MU] * c[_FZ]
     for i in range(4):
-        v_contact = slip[4 + i] + c[_R] * vel[5 + i]
-        V = max(abs(c[_R] * vel[5 + i]), math.sqrt(v_contact**2 + slip[i] ** 2), c[_V0])
+        v_contact = slip[4 + i] + c[_RW + i] * vel[5 + i]
+        V = max(abs(c[_RW + i] * vel[5 + i]), math.sqrt(v_contact**2 + slip[i] ** 2), c[_V0])
         d_lat, d_long = c[_CLAT] / V, c[_CLONG] / V
         sig = math.sqrt((d_lat * slip[i]) ** 2 + (d_long * slip[4 + i]) ** 2) / mufz
         g = 1.0 if sig < 1e-9 else math.tanh(sig) / sig

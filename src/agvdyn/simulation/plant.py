@@ -50,7 +50,7 @@ GRAVITY = 9.81
 
 from agvdyn.simulation._kernels import (  # noqa: F401  (compiled plant, re-exported)
     _A, _B, _BW, _CB, _CLAT, _CLONG, _COUL, _DCL, _DCR, _DSTOP, _DVL, _DVR, _DVW, _DCW, _EPS, _EU, _FZ, _IG,
-    _JUL, _JUR, _KSTOP, _L, _MB, _MU, _MU_MASS, _NCONST, _R, _RATIO, _TLIM, _V0, _VSTICK, _VSTRIB,
+    _JUL, _JUR, _KSTOP, _L, _MB, _MU, _MU_MASS, _NCONST, _R, _RATIO, _RW, _TLIM, _V0, _VSTICK, _VSTRIB,
     _mass_matrix, kinetic_energy, plant_step, run_open_loop,
 )
 
@@ -66,7 +66,10 @@ class PlantSettings:
     ``coulomb`` friction model (``"stiction"`` true stick/slip, ``"tanh"`` the model's, ``"none"``),
     ``breakaway_ratio`` (static / sliding friction, Stribeck velocity ``stribeck_velocity``),
     ``steering_masses`` (unit masses ``unit_mass`` at ``unit_offset`` from the steering axis; None
-    = the offset a), ``torque_limit`` (motor peak torque in N m; None = unlimited).
+    = the offset a), ``torque_limit`` (motor peak torque in N m; None = unlimited),
+    ``wheel_radius_error`` (relative error of each wheel's true rolling radius against the nominal
+    ``r`` that controller, odometry and model use: tyre tolerance and load; the main source of
+    odometry drift besides slip).
     Mechanical steering stops at +-pi/2: stiffness ``stop_stiffness``, damping ``stop_damping``.
     """
 
@@ -82,6 +85,7 @@ class PlantSettings:
     unit_mass: float = 30.0
     unit_offset: float | None = None
     torque_limit: float | None = 6.0
+    wheel_radius_error: tuple[float, float, float, float] = (0.002, -0.0015, 0.001, -0.002)
     stop_stiffness: float = 2.0e4
     stop_damping: float = 200.0
     substeps: int = 4
@@ -100,16 +104,20 @@ class PlantSettings:
             raise ValueError(f"unit_mass={self.unit_mass!r}: expected >= 0 kg")
         if self.torque_limit is not None and not self.torque_limit > 0:
             raise ValueError(f"torque_limit={self.torque_limit!r}: expected > 0 N m or None")
+        if len(self.wheel_radius_error) != 4 or not all(abs(e) < 0.2 for e in self.wheel_radius_error):
+            raise ValueError(f"wheel_radius_error={self.wheel_radius_error!r}: expected 4 relative errors, |e| < 0.2")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ValueError(f"substeps={self.substeps!r}: expected an integer >= 1")
 
     def ideal(self) -> "PlantSettings":
         """The same tyres with every neglected effect off (the identification model's structure)."""
         from dataclasses import replace
-        return replace(self, coulomb="tanh", steering_masses=False, torque_limit=None)
+        return replace(self, coulomb="tanh", steering_masses=False, torque_limit=None, wheel_radius_error=(0.0,) * 4)
 
     def to_dict(self) -> dict:
-        return dict(self.__dict__)
+        out = dict(self.__dict__)
+        out["wheel_radius_error"] = list(self.wheel_radius_error)
+        return out
 
 
 def plant_constants(geom: Geometry, params: Parameters, settings: PlantSettings) -> np.ndarray:
@@ -137,6 +145,7 @@ def plant_constants(geom: Geometry, params: Parameters, settings: PlantSettings)
                                                     settings.stribeck_velocity, EPSILON)
     c[_TLIM] = np.inf if settings.torque_limit is None else settings.torque_limit
     c[_KSTOP], c[_DSTOP] = settings.stop_stiffness, settings.stop_damping
+    c[_RW:_RW + 4] = geom.r * (1.0 + np.asarray(settings.wheel_radius_error, dtype=float))
     # chassis body inertia: total yaw inertia at alpha = 0 equals C_ch + C_l + C_r
     c[_CB] = 0.0
     M0 = np.zeros((9, 9))
