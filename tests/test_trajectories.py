@@ -219,3 +219,15 @@ def test_experiment_names():
     assert experiment("identification").name == "identification"
     with pytest.raises(TrajectoryError, match="unknown experiment"):
         experiment("slalom")
+
+
+def test_yaml_lane_change(tmp_path):
+    path = tmp_path / "lane.yaml"
+    path.write_text("segments:\n  - name: lane_change\n    speed: 0.5\n    offset: -1.0\n    length: 6\n",
+                    encoding="utf-8")
+    traj = read_trajectory(path)
+    assert traj.segments[0].mode is Mode.CAR_LIKE
+    assert traj.pose()[-1, 1] == pytest.approx(-1.0, abs=5e-3)
+    path.write_text("segments:\n  - name: lane_change\n    sped: 0.5\n", encoding="utf-8")
+    with pytest.raises(TrajectoryError, match=r"unknown keys \['sped'\]"):
+        read_trajectory(path)

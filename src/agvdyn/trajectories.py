@@ -591,7 +591,8 @@ def read_trajectory(path: str | os.PathLike, geom: Geometry = PROTOTYPE, *, dt: 
     which gives the derivatives. The file is never modified.
 
     YAML: ``segments:`` a list of ``{name, mode, fourier: {base_frequency, a, b}}`` (mode 1:
-    ``fourier: {alpha_l: {...}, alpha_r: {...}}``) or ``{name: align, to: [alpha_l, alpha_r]}``.
+    ``fourier: {alpha_l: {...}, alpha_r: {...}}``), ``{name: align, to: [alpha_l, alpha_r]}`` or
+    ``{name: lane_change, speed, offset, length, ...}`` (the arguments of :func:`lane_change`).
     """
     path = Path(path)
     if not path.exists():
@@ -711,6 +712,12 @@ def _read_yaml_trajectory(path: Path, geom: Geometry, dt: float) -> Trajectory:
                 target = np.asarray(spec.get("to", alpha_now), dtype=float)
                 seg = alignment(alpha_now, target, pause=float(spec.get("pause", 0.5)),
                                 rate=float(spec.get("rate", 0.8)), dt=dt)
+            elif name == "lane_change" and "fourier" not in spec:
+                keys = {"speed", "offset", "length", "acceleration", "straight_before", "straight_after"}
+                unknown = set(spec) - keys - {"name", "mode"}
+                if unknown:
+                    raise TrajectoryError(f"unknown keys {sorted(unknown)}: expected some of {sorted(keys)}")
+                seg = lane_change(geom, dt=dt, **{k: float(v) for k, v in spec.items() if k in keys}).segments[0]
             else:
                 mode = Mode.from_label(spec.get("mode", ""))
                 four = spec.get("fourier")

@@ -41,7 +41,6 @@ def _mass_matrix(c, alpha, M):
     M[1, 1] = c[_MB]
     M[2, 2] = c[_CB]
     m_u, e = c[_MU_MASS], c[_EU]
-    J = np.zeros(9)
     for i in range(4):
         side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
         ct, st = math.cos(th), math.sin(th)
@@ -63,7 +62,6 @@ def _mass_matrix(c, alpha, M):
         M[3 + side, 2] += Ju * h
     for i in range(4):
         M[5 + i, 5 + i] = c[_BW]
-    return J
 
 
 @njit(cache=True)
