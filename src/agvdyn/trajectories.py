@@ -513,10 +513,15 @@ class LimitReport:
         return all(self.peaks[k] <= self.limits[k] for k in self.peaks)
 
 
-def limit_report(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits()) -> LimitReport:
-    """Peaks of the planned velocities, accelerations and feed-forward torques (eq. 21 with ``params``)."""
-    qd, qdd = traj.joint_motion()
-    u = traj.feedforward(params)
+def limit_report(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(), *,
+                 motion: tuple[np.ndarray, np.ndarray] | None = None, torques: np.ndarray | None = None
+                 ) -> LimitReport:
+    """Peaks of the planned velocities, accelerations and feed-forward torques (eq. 21 with ``params``).
+
+    ``motion`` = ``traj.joint_motion()`` and ``torques`` = ``traj.feedforward(params)`` when already computed.
+    """
+    qd, qdd = traj.joint_motion() if motion is None else motion
+    u = traj.feedforward(params) if torques is None else torques
     values = {
         "steering_rate": np.abs(qd[:, 3:5]).max(axis=1),
         "steering_acceleration": np.abs(qdd[:, 3:5]).max(axis=1),
@@ -537,9 +542,11 @@ def limit_report(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits
     return LimitReport(peaks, lim, worst)
 
 
-def check_limits(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits()) -> LimitReport:
+def check_limits(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(), *,
+                 motion: tuple[np.ndarray, np.ndarray] | None = None, torques: np.ndarray | None = None
+                 ) -> LimitReport:
     """Raise :class:`LimitError` naming the first broken limit, its segment, time and value; else the report."""
-    report = limit_report(traj, params, limits)
+    report = limit_report(traj, params, limits, motion=motion, torques=torques)
     for k in report.peaks:
         if report.peaks[k] > report.limits[k]:
             seg, t = report.worst[k]

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -249,14 +249,14 @@ def simulate(
     Ts = settings.sample_time
     traj = _trajectory(experiment, platform, Ts)
     ctrl_params = plant_params if controller_params is None else controller_params
+    motion = traj.joint_motion()
+    q_dot_d = motion[0]
+    u_ff = traj.feedforward(ctrl_params)
     if settings.check_limits:
         limits = settings.limits
         if settings.plant.torque_limit is not None and settings.plant.torque_limit != limits.motor_torque:
-            from dataclasses import replace
             limits = replace(limits, motor_torque=settings.plant.torque_limit)
-        check_limits(traj, ctrl_params, limits)
-    q_dot_d, _ = traj.joint_motion()
-    u_ff = traj.feedforward(ctrl_params)
+        check_limits(traj, ctrl_params, limits, motion=motion, torques=u_ff)
     beta_d = traj.wheel_angles(q_dot_d)
     n = traj.n_samples
     rng = np.random.default_rng(seed)
