@@ -19,22 +19,25 @@ keeps the rest, so that total mass and yaw inertia at alpha = 0 still equal ``m_
 (the gyroscopic/Coriolis terms the paper neglects, sec. 4).
 
 Integration (why): the tyres make the system stiff (a wheel's reflected inertia ``B_w/r^2 = 12 kg``
-against a slip damping of ``C/v_0 ~ 1e6 N s/m`` has a time constant of ~10 us). Every dissipative
-force is linear in the velocities with a coefficient that depends on the state (tyre secant
-``F/s``, viscous friction, the secant of Coulomb friction), so one linearly-implicit (semi-implicit)
-Euler step solves ``(M + dt D(x_n)) v_{n+1} = M v_n + dt (B u - h(x_n, v_n) + f_stops)`` and then
-``x_{n+1} = x_n + dt v_{n+1}``. It is unconditionally stable for the stiff part, and as the
-slip stiffness grows the step becomes the M-orthogonal projection onto ``A v = 0``, i.e. the
-rolling-constraint model: the convergence test measures it. The step is ``T_s / substeps``
-(default 0.5 ms) for accuracy of the explicit Coriolis terms and of the lagged secants.
+against a slip damping of ``C/v_0 ~ 1e6 N s/m`` has a time constant of ~10 us). Tyre and
+friction forces are linearised about the current state and one linearly-implicit Euler step
+solves ``(M + dt D) v_{n+1} = M v_n + dt (B u - h(x_n, v_n) - e + f_stops)``, then
+``x_{n+1} = x_n + dt v_{n+1}``: tyres with their secant ``F/s`` (linear below saturation),
+viscous friction exactly, the Coulomb friction of a moving joint with its tangent
+(Rosenbrock-Euler, exact for a constant sliding force) and of a joint that one step could stop
+with its secant (never flips the sign of v, holds a stuck joint). The step is stable for any
+stiffness, and as the slip stiffness grows it becomes the M-orthogonal projection onto
+``A v = 0``, i.e. the rolling-constraint model: the convergence test measures it. The step is
+``T_s / substeps`` (default 0.5 ms) for accuracy of the explicit Coriolis terms.
 
-Coulomb friction with stiction: ``tau = -level(|v|) v / max(|v|, v_stick)``, implicit, with
-``v_stick = 1e-4 rad/s`` and ``level = d_c (1 + (ratio - 1) exp(-(v / v_stribeck)^2))``. Below the
-breakaway torque ``ratio d_c`` the joint sticks: its velocity stays below ``v_stick tau / (ratio d_c)``
-(creep of at most 1e-4 rad/s, a numerical regularisation 100 times narrower than the model's
-tanh with epsilon = 0.01 rad/s, which creeps at up to 0.01 rad/s under any torque); above it
-the joint breaks away and slides with ``d_c sign(v)``. ``coulomb="tanh"`` uses the
-identification model's ``d_c tanh(v / epsilon)`` instead (for the convergence test).
+Coulomb friction with stiction: ``F = level v / v_stick`` for ``|v| <= v_stick = 1e-4 rad/s``,
+``level sign(v)`` beyond, ``level = d_c (1 + (ratio - 1) exp(-(v / v_stribeck)^2))``. Below the
+breakaway torque ``ratio d_c`` a joint sticks (creep below 1e-4 rad/s, a numerical
+regularisation 100 times narrower than the model's tanh with epsilon = 0.01 rad/s, which creeps
+at up to 0.01 rad/s under any torque); above it the joint slides with ``d_c sign(v)``.
+``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
+
+All compiled code is in ``_kernels.py`` (see there why).
 """
 from __future__ import annotations
 
