@@ -48,8 +48,9 @@ def _draw(ax, t, measured, model, kept, *, mask_stiction: bool) -> None:
     step = max(1, t.size // MAX_POINTS)
     sl = slice(None, None, step)
     meas = np.where(kept, measured, np.nan) if mask_stiction else measured
+    mod = np.where(kept, model, np.nan) if mask_stiction else model
     ax.plot(t[sl], meas[sl], color="0.55", lw=1.2, label="measured  $H_k^T B u$")
-    ax.plot(t[sl], model[sl], color="C3", lw=0.9, ls="--", label=r"model  $H_k^T \Theta\, p$")
+    ax.plot(t[sl], mod[sl], color="C3", lw=0.9, ls="--", label=r"model  $H_k^T \Theta\, p$")
     if mask_stiction:
         dropped = ~kept[sl]
         if dropped.any():

@@ -171,7 +171,7 @@ def _reference(logs) -> tuple[Parameters, dict[str, float], str]:
             if isinstance(data, dict):
                 values = {n: (v.get("value") if isinstance(v, dict) else v) for n, v in data.items()}
                 if all(isinstance(values.get(n), (int, float)) for n in PARAMETER_NAMES):
-                    return Parameters(**{n: values[n] for n in PARAMETER_NAMES}), {}, f"true values ({key} of the sidecar)"
+                    return Parameters(**{n: values[n] for n in PARAMETER_NAMES}), {}, f"simulator truth: sidecar {key}"
     return PAPER_PARAMETERS, dict(PAPER_STD), "paper, Table 2"
 
 
