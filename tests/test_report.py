@@ -5,7 +5,6 @@ import base64
 import json
 import re
 
-import numpy as np
 import pytest
 from matplotlib.figure import Figure
 from typer.testing import CliRunner

@@ -104,7 +104,7 @@ def report_html(identification, validation=None, *, reference: Parameters = PAPE
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
              f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>",
              f"<p class='note'>generated {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}</p>"]
-    parts.append(f"<h2>Identified parameters (cf. Table 2)</h2>")
+    parts.append("<h2>Identified parameters (cf. Table 2)</h2>")
     parts.append(_table_html(table, {
         "value": "value", "std": "std", "unit": "unit", "fixed": "fixed",
         "reference": f"reference ({reference_label})", "reference_std": "reference std",
