@@ -211,3 +211,20 @@ def test_motor_torque_offsets_are_estimated(model_data):
     plain = identify(log, PROTOTYPE, settings=IdentificationSettings(torque_offsets=False))
     assert _rel_error(plain).max() > 1e-2
     assert plain.offsets == {} and plain.offset_vector is None
+
+
+@pytest.mark.parametrize("segments, modes", [
+    ({"straight": 6.0}, "2s"),
+    ({"rotation": 6.0}, "4"),
+    ({"steer_left": 6.0, "steer_right": 6.0, "straight": 6.0, "rotation": 6.0}, "1,2s,4"),
+])
+def test_refusal_agrees_with_table1_rank(segments, modes):
+    """The data-based rank check refuses exactly 11 - rank parameters of the random-motion QR of
+    agvdyn.identifiability (Table 1), with B_w free and no offsets."""
+    from agvdyn.identifiability import base_parameters, parse_modes
+
+    rank = base_parameters(PROTOTYPE, parse_modes(modes)).rank
+    frame, _ = identification_frame(segments)
+    with pytest.raises(UnidentifiableError) as info:
+        identify(Log.from_frame(frame), PROTOTYPE, fixed={}, settings=IdentificationSettings(torque_offsets=False))
+    assert len(info.value.dependencies) == len(PARAMETER_NAMES) - rank
