@@ -211,8 +211,11 @@ class SimulationResult:
 
 def _trajectory(experiment: str | os.PathLike | Trajectory, geom: Geometry, dt: float) -> Trajectory:
     if isinstance(experiment, Trajectory):
-        if experiment.geometry != geom:
-            raise ValueError(f"trajectory planned for platform {experiment.geometry} but simulated on {geom}")
+        planned = {k: v for k, v in experiment.geometry.to_dict().items() if k != "name"}
+        given = {k: v for k, v in geom.to_dict().items() if k != "name"}
+        if planned != given:
+            raise ValueError(f"trajectory planned for the platform {planned} but used on {given}: "
+                             "plan it with the same geometry")
         if abs(experiment.sample_time - dt) > 1e-12:
             raise ValueError(f"trajectory sampled at {experiment.sample_time} s, expected {dt} s")
         return experiment
