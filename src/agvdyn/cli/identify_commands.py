@@ -47,11 +47,12 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
-              steering_stiction: float = 0.1, offsets: bool = True) -> IdentificationSettings:
+              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0) -> IdentificationSettings:
     try:
         return IdentificationSettings(
             filter=FilterSettings(cutoff=cutoff, order=order), filtering=Filtering(filtering),
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
+            stiction_guard=guard,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
         raise fail(f"{exc} (filtering must be one of {[f.value for f in Filtering]})") from exc
@@ -90,13 +91,14 @@ def identify(
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
     stiction: float = typer.Option(0.05, help="Rows of x_ch, y_ch, gamma_ch with |generalized velocity| below this are dropped (m/s, rad/s)."),
     steering_stiction: float = typer.Option(0.1, help="The same for the steering coordinates alpha_l, alpha_r, alpha_v (rad/s)."),
+    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
     offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets with the parameters."),
     segments: Optional[str] = typer.Option(None, help="Comma-separated segment names to use; default: every segment with a mode."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file."""
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets)
+    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard)
     loaded, geometry = _load(logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
@@ -138,12 +140,13 @@ def validate(
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
     stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
     steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
+    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
     from agvdyn.validation import validate as validate_log
 
-    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction)
+    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard)
     (loaded,), geometry = _load([log], mapping, platform)
     try:
         parameters = read_parameters(params).parameters
@@ -189,6 +192,7 @@ def report(
     order: int = typer.Option(4, help="Order of the Butterworth prototype."),
     stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
     steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
+    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
     offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets."),
 ) -> None:
     """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
@@ -196,7 +200,7 @@ def report(
     from agvdyn.validation import validate as validate_log
 
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, offsets)
+    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, offsets, stiction_guard)
     loaded, geometry = _load(ident_logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
