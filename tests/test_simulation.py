@@ -255,3 +255,13 @@ def test_coriolis_terms_do_no_spurious_work():
         m_dot = (M1 - M2) / (2 * eps)
         assert v @ h == pytest.approx(0.5 * v @ m_dot @ v, rel=1e-6, abs=1e-8)
         assert np.abs(h).max() > 1e-3  # the terms are there
+
+
+@pytest.mark.parametrize("geom", [
+    PROTOTYPE.__class__(l=1.6, b=1.0, a=0.08, r=0.125, i_G=20.0, name="large"),
+    PROTOTYPE.__class__(l=1.2, b=0.8, a=-0.04, r=0.1, i_G=25.0, name="inboard offset"),
+])
+def test_other_platforms_are_followed(geom):
+    lane = lane_change(geom, speed=0.6, offset=0.5, length=4.0, straight_before=0.1, straight_after=0.1)
+    tab = simulate(lane, platform=geom, seed=1).tracking()
+    assert tab["steering_max"].max() < 0.02 and tab["heading_error"].max() < 0.02

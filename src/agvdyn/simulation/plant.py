@@ -68,8 +68,9 @@ class PlantSettings:
     ``mu``, standstill regularisation ``slip_velocity`` (m/s). Neglected effects, each switchable:
     ``coulomb`` friction model (``"stiction"`` true stick/slip, ``"tanh"`` the model's, ``"none"``),
     ``breakaway_ratio`` (static / sliding friction, Stribeck velocity ``stribeck_velocity``),
-    ``steering_masses`` (unit masses ``unit_mass`` at ``unit_offset`` from the steering axis; None
-    = the offset a), ``torque_limit`` (motor peak torque in N m; None = unlimited),
+    ``steering_masses`` (unit masses ``unit_mass`` at ``unit_offset`` from the steering axis; offset
+    None = the offset a; mass None = 30 kg, or less where 30 kg at that offset would take more than
+    half of C_l/2 or C_r/2 as the units' share of the steering inertia), ``torque_limit`` (motor peak torque in N m; None = unlimited),
     ``wheel_radius_error`` (relative error of each wheel's true rolling radius against the nominal
     ``r`` that controller, odometry and model use: tyre tolerance and load; the main source of
     odometry drift besides slip).
@@ -85,7 +86,7 @@ class PlantSettings:
     breakaway_ratio: float = 1.0
     stribeck_velocity: float = 0.01
     steering_masses: bool = True
-    unit_mass: float = 30.0
+    unit_mass: float | None = None
     unit_offset: float | None = None
     torque_limit: float | None = 6.0
     wheel_radius_error: tuple[float, float, float, float] = (0.002, -0.0015, 0.001, -0.002)
@@ -103,7 +104,7 @@ class PlantSettings:
                 raise ValueError(f"plant setting {key}={v!r}: expected a finite number > 0")
         if not self.breakaway_ratio >= 1:
             raise ValueError(f"breakaway_ratio={self.breakaway_ratio!r}: expected >= 1 (static >= sliding friction)")
-        if not self.unit_mass >= 0:
+        if self.unit_mass is not None and not self.unit_mass >= 0:
             raise ValueError(f"unit_mass={self.unit_mass!r}: expected >= 0 kg")
         if self.torque_limit is not None and not self.torque_limit > 0:
             raise ValueError(f"torque_limit={self.torque_limit!r}: expected > 0 N m or None")
@@ -123,12 +124,20 @@ class PlantSettings:
         return out
 
 
+def default_unit_mass(params: Parameters, offset: float, mass: float = 30.0) -> float:
+    """30 kg per steering unit, capped so that the units' share ``m e^2`` is at most half of C/2."""
+    if offset == 0:
+        return mass
+    return min(mass, 0.25 * min(params.C_l, params.C_r) / offset**2)
+
+
 def plant_constants(geom: Geometry, params: Parameters, settings: PlantSettings) -> np.ndarray:
     """Constant vector of the compiled plant from geometry, true parameters (eq. 18) and settings."""
     c = np.zeros(_NCONST)
     c[_L], c[_B], c[_A], c[_R], c[_IG] = geom.l, geom.b, geom.a, geom.r, geom.i_G
-    m_u = settings.unit_mass if settings.steering_masses else 0.0
     e_u = (geom.a if settings.unit_offset is None else settings.unit_offset) if settings.steering_masses else 0.0
+    m_u = default_unit_mass(params, e_u) if settings.unit_mass is None else settings.unit_mass
+    m_u = m_u if settings.steering_masses else 0.0
     for key, C in ((_JUL, params.C_l), (_JUR, params.C_r)):
         c[key] = C / 2 - m_u * e_u**2
         if c[key] < 0:
