@@ -198,6 +198,7 @@ class SimulationResult:
             "controller_parameters": self.controller_params.to_dict(),
             "seed": int(self.seed),
             "settings": self.settings.to_dict(),
+            "plant": _plant_facts(self.geometry, self.plant_params, self.settings.plant),
             "floor_space": {"length": fs.length, "width": fs.width},
             "tracking": self.tracking().to_dict(orient="records"),
         }
@@ -207,6 +208,19 @@ class SimulationResult:
         from agvdyn.io import write_log
 
         return write_log(path, self.log_frame(), self.sidecar())
+
+
+def _plant_facts(geom: Geometry, params: Parameters, plant: PlantSettings) -> dict[str, Any]:
+    """Derived quantities of the simulated vehicle (for the sidecar)."""
+    from agvdyn.simulation import plant as _plant
+
+    c = plant_constants(geom, params, plant)
+    return {
+        "unit_mass": float(c[_plant._MU_MASS]), "unit_offset": float(c[_plant._EU]),
+        "chassis_body_mass": float(c[_plant._MB]), "chassis_body_inertia": float(c[_plant._CB]),
+        "wheel_radii": [float(x) for x in c[_plant._RW:_plant._RW + 4]],
+        "wheel_load": float(c[_plant._FZ]),
+    }
 
 
 def _trajectory(experiment: str | os.PathLike | Trajectory, geom: Geometry, dt: float) -> Trajectory:
