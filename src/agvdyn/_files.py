@@ -19,6 +19,10 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], None]) -> 
     tmp = Path(tmp_name)
     try:
         write(tmp)
+        if tmp.is_file():  # mkstemp creates 0600; give the file the permissions of a plain open()
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
