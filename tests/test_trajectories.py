@@ -231,3 +231,13 @@ def test_yaml_lane_change(tmp_path):
     path.write_text("segments:\n  - name: lane_change\n    sped: 0.5\n", encoding="utf-8")
     with pytest.raises(TrajectoryError, match=r"unknown keys \['sped'\]"):
         read_trajectory(path)
+
+
+def test_trajectory_checks_continuity_and_modes(sequence):
+    with pytest.raises(TrajectoryError, match=r"segment 1 \('rotation'\) starts at alpha"):
+        Trajectory((sequence.segments[5], sequence.segments[7]))  # straight, then rotation without alignment
+    bad = sequence.segments[7]
+    from agvdyn.trajectories import Segment
+    wrong = Segment("rotation", Mode.ROTATION, bad.t, np.zeros_like(bad.alpha), bad.s, bad.s_dot, bad.s_ddot)
+    with pytest.raises(TrajectoryError, match=r"segment 0 \('rotation'\).*not in mode 4"):
+        Trajectory((wrong,))

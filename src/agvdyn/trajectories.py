@@ -39,6 +39,8 @@ from agvdyn.kinematics import (
 )
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
 
+#: Largest jump of the steering angles (rad) allowed between the end of a segment and the next one.
+CONTINUITY_TOLERANCE = 1e-3
 #: Segment names of PLATFORM.md (the ``segment`` column of a log).
 SEGMENT_NAMES = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align")
 
@@ -191,6 +193,16 @@ class Trajectory:
         if not self.segments:
             raise TrajectoryError("a trajectory needs at least one segment")
         object.__setattr__(self, "segments", tuple(self.segments))
+        for i, seg in enumerate(self.segments):
+            try:
+                check_mode(self.geometry, seg.mode, seg.alpha)
+            except ValueError as exc:
+                raise TrajectoryError(f"segment {i} ({seg.name!r}): {exc}") from exc
+            if i and np.max(np.abs(seg.alpha[0] - self.segments[i - 1].alpha[-1])) > CONTINUITY_TOLERANCE:
+                raise TrajectoryError(
+                    f"segment {i} ({seg.name!r}) starts at alpha = {tuple(np.round(seg.alpha[0], 6))} but segment "
+                    f"{i - 1} ends at {tuple(np.round(self.segments[i - 1].alpha[-1], 6))}: insert an alignment"
+                )
 
     @cached_property
     def bounds(self) -> np.ndarray:
