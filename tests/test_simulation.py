@@ -265,3 +265,21 @@ def test_other_platforms_are_followed(geom):
     lane = lane_change(geom, speed=0.6, offset=0.5, length=4.0, straight_before=0.1, straight_after=0.1)
     tab = simulate(lane, platform=geom, seed=1).tracking()
     assert tab["steering_max"].max() < 0.02 and tab["heading_error"].max() < 0.02
+
+
+def test_settings_file(tmp_path):
+    from agvdyn.simulation import read_settings
+
+    path = tmp_path / "sim.yaml"
+    path.write_text("plant: {coulomb: tanh, wheel_radius_error: [0, 0, 0, 0.01]}\n"
+                    "controller: {steering_gain: 500}\nsensors: {steering_noise: 0.0}\n", encoding="utf-8")
+    st = read_settings(path)
+    assert st.plant.coulomb == "tanh" and st.plant.wheel_radius_error == (0, 0, 0, 0.01)
+    assert st.controller.steering_gain == 500 and st.sensors.steering_noise == 0.0
+    assert st.sensors.encoder_counts == 4096  # defaults kept
+    path.write_text("plant: {stiffness: 3}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"plant: unknown keys \['stiffness'\]"):
+        read_settings(path)
+    path.write_text("plant: {coulomb: viscous}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="coulomb='viscous'"):
+        read_settings(path)

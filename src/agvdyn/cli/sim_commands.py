@@ -64,12 +64,24 @@ def simulate(
     controller_params: Optional[Path] = typer.Option(None, help="The controller's parameter estimate for the "
                                                                "feed-forward; default: the true parameters."),
     seed: int = typer.Option(0, help="Seed of the sensor noise; equal seeds give equal logs."),
+    settings: Optional[Path] = typer.Option(None, help="Simulation settings (YAML: plant, controller, sensors, "
+                                                      "limits; see docs/simulation.md)."),
+    ideal_plant: bool = typer.Option(False, "--ideal-plant", help="Switch the neglected effects off (tanh "
+                                     "friction, no unit masses, no torque limit, exact wheel radii)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar and no table."),
 ) -> None:
     """Simulate an experiment in closed loop (plant with tyre slip) and write the log the sensors record."""
-    from agvdyn.simulation import simulate as run
+    from dataclasses import replace
+
+    from agvdyn.simulation import SimulationSettings, read_settings, simulate as run
     from agvdyn.trajectories import TrajectoryError
 
+    try:
+        sim_settings = SimulationSettings() if settings is None else read_settings(settings)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    if ideal_plant:
+        sim_settings = replace(sim_settings, plant=sim_settings.plant.ideal())
     geom = _platform(platform)
     true_params = _params(params)
     ctrl_params = _params(controller_params, true_params)
@@ -77,7 +89,8 @@ def simulate(
     console = Console(stderr=True)
     try:
         if quiet:
-            result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params, seed=seed)
+            result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params,
+                         settings=sim_settings, seed=seed)
         else:
             with Progress(TextColumn("simulating {task.description}"), BarColumn(),
                           TextColumn("{task.completed:.1f} s of motion"), TimeElapsedColumn(),
@@ -88,7 +101,7 @@ def simulate(
                     bar.update(task, completed=done * SAMPLE_TIME, total=total * SAMPLE_TIME)
 
                 result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params,
-                             seed=seed, progress=progress)
+                             settings=sim_settings, seed=seed, progress=progress)
         path = result.write(out)
     except (TrajectoryError, ValueError, OSError, FloatingPointError) as exc:
         raise fail(str(exc)) from exc

@@ -41,7 +41,7 @@ from agvdyn.trajectories import (
 
 __all__ = [
     "ControllerSettings", "PlantSettings", "SensorSettings", "SimulationSettings", "SimulationResult",
-    "simulate", "feedforward_table", "run_open_loop", "plant_constants",
+    "simulate", "feedforward_table", "run_open_loop", "plant_constants", "read_settings", "settings_from_dict",
 ]
 
 #: Samples simulated between two progress reports.
@@ -73,6 +73,50 @@ class SimulationSettings:
             "sensors": self.sensors.to_dict(), "limits": dict(self.limits.__dict__),
             "check_limits": self.check_limits, "sample_time": self.sample_time,
         }
+
+
+_SETTING_GROUPS = {"plant": PlantSettings, "controller": ControllerSettings, "sensors": SensorSettings,
+                   "limits": Limits}
+
+
+def settings_from_dict(data: dict[str, Any], source: str = "<settings>") -> SimulationSettings:
+    """SimulationSettings from a mapping ``{plant: {...}, controller: {...}, sensors: {...}, limits: {...},
+    check_limits: bool}``; unset keys keep their defaults, unknown keys are an error naming them."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: expected a mapping at the top level")
+    unknown = set(data) - set(_SETTING_GROUPS) - {"check_limits", "sample_time"}
+    if unknown:
+        raise ValueError(f"{source}: unknown keys {sorted(unknown)}: expected some of "
+                         f"{sorted([*_SETTING_GROUPS, 'check_limits', 'sample_time'])}")
+    groups: dict[str, Any] = {}
+    for key, cls in _SETTING_GROUPS.items():
+        values = data.get(key) or {}
+        if not isinstance(values, dict):
+            raise ValueError(f"{source}: {key}: expected a mapping")
+        allowed = set(cls.__dataclass_fields__)
+        bad = set(values) - allowed
+        if bad:
+            raise ValueError(f"{source}: {key}: unknown keys {sorted(bad)}: expected some of {sorted(allowed)}")
+        if "wheel_radius_error" in values:
+            values = {**values, "wheel_radius_error": tuple(values["wheel_radius_error"])}
+        try:
+            groups[key] = cls(**values)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: {key}: {exc}") from exc
+    extra = {k: data[k] for k in ("check_limits", "sample_time") if k in data}
+    return SimulationSettings(**groups, **extra)
+
+
+def read_settings(path: str | os.PathLike) -> SimulationSettings:
+    """Simulation settings from a YAML file (see :func:`settings_from_dict`); the file is only read."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"{path}: cannot be read as YAML: {exc}") from exc
+    return settings_from_dict(data or {}, str(path))
 
 
 @dataclass(frozen=True, eq=False)
