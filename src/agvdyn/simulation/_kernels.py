@@ -380,7 +380,8 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
             # sideways (mode 3: steering torque = a F_y of the side): no integral part
             state[13 + j] = 0.0
         else:  # integral part, clamped (anti-windup)
-            state[13 + j] = min(max(state[13 + j] + g[8] * e * Ts, -g[9]), g[9])
+            e_i = e - g[10] if e > g[10] else (e + g[10] if e < -g[10] else 0.0)  # dead band
+            state[13 + j] = min(max(state[13 + j] + g[8] * e_i * Ts, -g[9]), g[9])
         ts = g[2] * e + g[3] * (alpha_dot_d[k, j] - state[10 + j]) + state[13 + j]
         dm = ts * g[6]
         s = 1.0 if j == 0 else -1.0

@@ -38,7 +38,9 @@ class ControllerSettings:
     steering_gain : steering torque (N m, steering side) per rad of steering error.
     steering_damping : steering torque per rad/s of steering-rate error.
     steering_integral : steering torque per rad s of integrated steering error (holds the steering
-        against stiction and feed-forward errors), limited to +- ``steering_integral_limit`` N m.
+        against stiction and feed-forward errors), limited to +- ``steering_integral_limit`` N m;
+        errors within +- ``steering_deadband`` (rad, a few sensor counts) are not integrated, so that
+        the integral does not hunt against stiction while the steering stands still.
     wheel_filter, steering_filter : time constants (s) of the first-order filters of the
         difference quotients of the encoders.
     feedback : False runs the feed-forward alone.
@@ -50,13 +52,15 @@ class ControllerSettings:
     steering_damping: float = 15.0
     steering_integral: float = 3000.0
     steering_integral_limit: float = 20.0
+    steering_deadband: float = 0.002
     wheel_filter: float = 0.004
     steering_filter: float = 0.015
     feedback: bool = True
 
     def __post_init__(self) -> None:
         for key in ("wheel_velocity_gain", "wheel_position_gain", "steering_gain", "steering_damping",
-                    "steering_integral", "steering_integral_limit", "wheel_filter", "steering_filter"):
+                    "steering_integral", "steering_integral_limit", "steering_deadband", "wheel_filter",
+                    "steering_filter"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"controller setting {key}={v!r}: expected a finite number >= 0")
@@ -66,7 +70,7 @@ class ControllerSettings:
         return np.array([
             self.wheel_velocity_gain, self.wheel_position_gain, self.steering_gain, self.steering_damping,
             self.wheel_filter, self.steering_filter, geom.r / (2 * geom.a * geom.i_G), float(self.feedback),
-            self.steering_integral, self.steering_integral_limit,
+            self.steering_integral, self.steering_integral_limit, self.steering_deadband,
         ])
 
     def to_dict(self) -> dict:
