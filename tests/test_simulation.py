@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import yaml
 
 from agvdyn.io import LOG_COLUMNS, read_log
 from agvdyn.kinematics import Mode
@@ -277,6 +278,11 @@ def test_settings_file(tmp_path):
     assert st.plant.coulomb == "tanh" and st.plant.wheel_radius_error == (0, 0, 0, 0.01)
     assert st.controller.steering_gain == 500 and st.sensors.steering_noise == 0.0
     assert st.sensors.encoder_counts == 4096  # defaults kept
+    from agvdyn.simulation import settings_from_dict
+
+    # the settings recorded in a sidecar rebuild the same settings
+    custom = SimulationSettings(plant=replace(PlantSettings(), unit_mass=20.0), check_limits=False)
+    assert settings_from_dict(yaml.safe_load(yaml.safe_dump(custom.to_dict()))) == custom
     path.write_text("plant: {stiffness: 3}\n", encoding="utf-8")
     with pytest.raises(ValueError, match=r"plant: unknown keys \['stiffness'\]"):
         read_settings(path)
