@@ -363,12 +363,18 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
     if g[7] == 0.0:
         return
     lateral = mode_d[k] == 3
+    at_rest = mode_d[k] == 1 or lateral
+    if k == 0 or mode_d[k] != mode_d[k - 1]:
+        # mode switch: the wheel-angle references restart from the measured angles (the errors of
+        # the previous mode, e.g. a steering-wheel difference from slip while driving, are dropped)
+        for i in range(4):
+            state[15 + i] = beta_m[i] - beta_d[k, i]
     for j in range(2):
-        e_f = beta_d[k, 2 * j] - beta_m[2 * j]
-        e_r = beta_d[k, 2 * j + 1] - beta_m[2 * j + 1]
+        e_f = beta_d[k, 2 * j] + state[15 + 2 * j] - beta_m[2 * j]
+        e_r = beta_d[k, 2 * j + 1] + state[16 + 2 * j] - beta_m[2 * j + 1]
         v_f = beta_dot_d[k, 2 * j] - state[6 + 2 * j]
         v_r = beta_dot_d[k, 2 * j + 1] - state[7 + 2 * j]
-        if not lateral:  # the front-rear difference of a side is its steering: left to the steering loop
+        if not at_rest:  # driving: the front-rear difference of a side is its steering, left to the steering loop
             e_f = e_r = 0.5 * (e_f + e_r)
             v_f = v_r = 0.5 * (v_f + v_r)
         u[2 * j] += g[0] * v_f + g[1] * e_f

@@ -6,12 +6,14 @@ every ``T_s`` on sensor readings only (quantized encoders and steering angles):
 
 - wheel speed loops, one per wheel: ``kv (beta_dot_d - beta_dot_f) + kp e_beta``, with
   ``beta_dot_f`` the low-passed difference quotient of the encoder; the position term is the
-  integral part of the speed loop. Outside the lateral mode the difference of the front and rear
-  wheel angle of a side is, by the rolling constraints, the steering angle of that side
+  integral part of the speed loop, and its references restart from the measured wheel angles
+  at every mode switch. While driving (modes 2, 4, straight) the difference of the front and
+  rear wheel angle of a side is, by the rolling constraints, the steering angle of that side
   (``beta_f - beta_r = -2 s a alpha / r`` when ``v_y = 0``); tyre slip makes it disagree with the
-  steering sensor, so there the speed and angle errors keep only the mean of the side's two wheels and the
-  steering is left to the steering loop (on both, the loops fight and the steering drifts by
-  up to 0.1 rad in the lane change). In mode 3 (``v_y`` is that difference) the full error is used;
+  steering sensor, so there the speed and angle errors keep only the mean of the side's two
+  wheels and the steering is left to the steering loop (with both, the loops fight and the
+  steering drifts by up to 0.1 rad in the lane change). At rest (mode 1) and in mode 3 the full
+  error is used: it holds the chassis (in mode 3 that difference is ``v_y``);
 - steering loops, one per side: a PID steering torque ``T_s = k_a e + d_a e_dot + k_i int e`` on ``e = alpha_d - alpha``
   produced by a differential torque of the front and rear wheel of that side: the longitudinal
   wheel forces act at the offset ``a`` from the steering axis, so a torque pair ``+-dM`` on the
@@ -78,8 +80,8 @@ class ControllerSettings:
 
 
 #: Controller state: previous beta (4), alpha (2), filtered beta_dot (4), alpha_dot (2), started flag,
-#: steering integrals (2).
-STATE_SIZE = 15
+#: steering integrals (2), wheel-angle reference offsets (4).
+STATE_SIZE = 19
 
 
 from agvdyn.simulation._kernels import controller_step  # noqa: E402,F401  (compiled)
