@@ -141,8 +141,12 @@ def test_lane_change_and_lateral_are_followed():
     assert row["steering_max"] < 0.03 and row["heading_error"] < 0.02 and row["position_error"] < 0.05
     assert lane.position[-1, 1] == pytest.approx(1.0, abs=0.05)
     lateral = simulate(lateral_experiment(series=_series(4, 0.4), pause=0.2), seed=1)
-    tab = lateral.tracking()
-    assert tab["steering_max"].max() < 0.03 and tab["position_error"].max() < 0.02
+    tab = lateral.tracking().set_index("segment", append=True)
+    assert tab.xs("lateral", level=1)["steering_max"].max() < 0.015
+    # leaving the stops: at alpha = (-pi/2, pi/2) a steering torque is a lateral force of its side
+    # (T = a F_y), and left and right friction differ, so the chassis is pushed while the wheels
+    # break away; the steering lags by a few centiradians there
+    assert tab["steering_max"].max() < 0.05 and tab["position_error"].max() < 0.02
     # the steering rests on its stops during the lateral motion
     lat = lateral.segment == "lateral"
     assert np.all(np.abs(np.abs(lateral.position[lat, 3:5]) - math.pi / 2) < 0.02)

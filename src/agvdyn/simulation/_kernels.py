@@ -363,27 +363,37 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
     if g[7] == 0.0:
         return
     lateral = mode_d[k] == 3
-    at_rest = mode_d[k] == 1 or lateral
+    lim = 0.5 * math.pi - 0.3
+    near_lateral = lateral or (mode_d[k] == 1 and abs(alpha_d[k, 0]) > lim and abs(alpha_d[k, 1]) > lim)
     if k == 0 or mode_d[k] != mode_d[k - 1]:
         # mode switch: the wheel-angle references restart from the measured angles (the errors of
         # the previous mode, e.g. a steering-wheel difference from slip while driving, are dropped)
         for i in range(4):
             state[15 + i] = beta_m[i] - beta_d[k, i]
+    ra = g[11]  # a / r
     for j in range(2):
+        s = 1.0 if j == 0 else -1.0
         e_f = beta_d[k, 2 * j] + state[15 + 2 * j] - beta_m[2 * j]
         e_r = beta_d[k, 2 * j + 1] + state[16 + 2 * j] - beta_m[2 * j + 1]
         v_f = beta_dot_d[k, 2 * j] - state[6 + 2 * j]
         v_r = beta_dot_d[k, 2 * j + 1] - state[7 + 2 * j]
-        if not at_rest:  # driving: the front-rear difference of a side is its steering, left to the steering loop
-            e_f = e_r = 0.5 * (e_f + e_r)
-            v_f = v_r = 0.5 * (v_f + v_r)
-        u[2 * j] += g[0] * v_f + g[1] * e_f
-        u[2 * j + 1] += g[0] * v_r + g[1] * e_r
+        e_c, e_d = 0.5 * (e_f + e_r), 0.5 * (e_f - e_r)
+        v_c, v_d = 0.5 * (v_f + v_r), 0.5 * (v_f - v_r)
+        if near_lateral:
+            # keep the part of the front-rear difference that the steering does not explain
+            # (beta_f - beta_r = -2 s a alpha / r at rest): lateral motion of the chassis
+            e_d += s * ra * (alpha_d[k, j] - alpha_m[j])
+            v_d += s * ra * (alpha_dot_d[k, j] - state[10 + j])
+        else:  # the difference is the steering (slip makes it disagree): left to the steering loop
+            e_d = 0.0
+            v_d = 0.0
+        u[2 * j] += g[0] * (v_c + v_d) + g[1] * (e_c + e_d)
+        u[2 * j + 1] += g[0] * (v_c - v_d) + g[1] * (e_c - e_d)
     for j in range(2):
         e = alpha_d[k, j] - alpha_m[j]
-        if lateral or abs(alpha_d[k, j]) > 0.5 * math.pi - 0.05:
-            # the steering rests on (or goes to) its stop, where pushing it means pushing the chassis
-            # sideways (mode 3: steering torque = a F_y of the side): no integral part
+        if lateral:
+            # the steering rests on its stop, where pushing it means pushing the chassis sideways
+            # (mode 3: steering torque = a F_y of the side): no integral part
             state[13 + j] = 0.0
         else:  # integral part, clamped (anti-windup)
             e_i = e - g[10] if e > g[10] else (e + g[10] if e < -g[10] else 0.0)  # dead band

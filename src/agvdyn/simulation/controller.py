@@ -7,13 +7,14 @@ every ``T_s`` on sensor readings only (quantized encoders and steering angles):
 - wheel speed loops, one per wheel: ``kv (beta_dot_d - beta_dot_f) + kp e_beta``, with
   ``beta_dot_f`` the low-passed difference quotient of the encoder; the position term is the
   integral part of the speed loop, and its references restart from the measured wheel angles
-  at every mode switch. While driving (modes 2, 4, straight) the difference of the front and
-  rear wheel angle of a side is, by the rolling constraints, the steering angle of that side
-  (``beta_f - beta_r = -2 s a alpha / r`` when ``v_y = 0``); tyre slip makes it disagree with the
-  steering sensor, so there the speed and angle errors keep only the mean of the side's two
-  wheels and the steering is left to the steering loop (with both, the loops fight and the
-  steering drifts by up to 0.1 rad in the lane change). At rest (mode 1) and in mode 3 the full
-  error is used: it holds the chassis (in mode 3 that difference is ``v_y``);
+  at every mode switch. The loops act on the mean of a side's front and rear wheel; their
+  difference is, by the rolling constraints, the steering angle of that side
+  (``beta_f - beta_r = -2 s a alpha / r`` at rest and while driving with ``v_y = 0``), which tyre
+  slip makes disagree with the steering sensor, so it is left to the steering loop (with both,
+  the loops fight and the steering drifts by up to 0.1 rad in the lane change). In mode 3 and
+  while aligning near it (both sides within 0.3 rad of the stops) the difference also measures
+  the lateral motion of the chassis; there the part the steering sensor does not explain is fed
+  back too, which holds the chassis while the wheels turn into their stops;
 - steering loops, one per side: a PID steering torque ``T_s = k_a e + d_a e_dot + k_i int e`` on ``e = alpha_d - alpha``
   produced by a differential torque of the front and rear wheel of that side: the longitudinal
   wheel forces act at the offset ``a`` from the steering axis, so a torque pair ``+-dM`` on the
@@ -72,7 +73,7 @@ class ControllerSettings:
         return np.array([
             self.wheel_velocity_gain, self.wheel_position_gain, self.steering_gain, self.steering_damping,
             self.wheel_filter, self.steering_filter, geom.r / (2 * geom.a * geom.i_G), float(self.feedback),
-            self.steering_integral, self.steering_integral_limit, self.steering_deadband,
+            self.steering_integral, self.steering_integral_limit, self.steering_deadband, geom.a / geom.r,
         ])
 
     def to_dict(self) -> dict:
