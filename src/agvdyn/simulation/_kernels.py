@@ -18,7 +18,6 @@ from numba import njit
 _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 
 
-
 # --- plant (see plant.py) ---
 
 @njit(cache=True)
