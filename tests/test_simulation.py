@@ -336,3 +336,11 @@ def test_free_plant_conserves_momentum():
         drift.append(np.hypot(*(lin1 - lin0)) / np.hypot(*lin0) + abs(ang1 - ang0) / abs(ang0))
     assert drift[1] < 2e-4
     assert 3.0 < drift[0] / drift[1] < 5.0  # first order: 4x smaller step, 4x smaller drift
+
+
+def test_feedforward_table_refuses_broken_limits():
+    fast = FourierSeries.at_rest(2 * math.pi / 4, (1.0, -0.5), (0.3, 0.2), peak_velocity=3.0)
+    traj = Trajectory((fourier_segment("straight", Mode.STRAIGHT, fast),))
+    with pytest.raises(LimitError, match="speed limit"):
+        feedforward_table(traj, P)
+    assert len(feedforward_table(traj, P, limits=None)) == traj.n_samples

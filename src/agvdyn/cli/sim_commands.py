@@ -118,16 +118,18 @@ def feedforward(
     params: Path = typer.Option(..., help="Parameter file (YAML/JSON) of the feed-forward, eq. (21)."),
     out: Path = typer.Option(..., "--out", help="Table to write (.csv or .parquet)."),
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    no_check: bool = typer.Option(False, "--no-check", help="Write the table even if the trajectory breaks "
+                                  "the velocity, acceleration or torque limits."),
 ) -> None:
     """Write the planned trajectory with its feed-forward motor torques of eq. (21), one row per 2 ms."""
     from agvdyn.simulation import feedforward_table
-    from agvdyn.trajectories import TrajectoryError
+    from agvdyn.trajectories import Limits, TrajectoryError
 
     geom = _platform(platform)
     p = _params(params)
     _output(out)
     try:
-        table = feedforward_table(experiment, p, geom)
+        table = feedforward_table(experiment, p, geom, limits=None if no_check else Limits())
     except (TrajectoryError, ValueError) as exc:
         raise fail(str(exc)) from exc
     if out.suffix.lower() == ".csv":

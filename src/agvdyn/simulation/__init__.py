@@ -358,15 +358,20 @@ def simulate(
 
 
 def feedforward_table(experiment: str | os.PathLike | Trajectory, params: Parameters = PAPER_PARAMETERS,
-                      platform: Geometry = PROTOTYPE, *, sample_time: float = SAMPLE_TIME) -> pd.DataFrame:
+                      platform: Geometry = PROTOTYPE, *, sample_time: float = SAMPLE_TIME,
+                      limits: Limits | None = Limits()) -> pd.DataFrame:
     """Planned trajectory with its feed-forward motor torques of eq. (21), one row per sample.
 
     Columns: t, segment, mode (label), alpha_l, alpha_r, the planned q_dot (v_x, v_y, omega,
     alpha_l_dot, alpha_r_dot, beta_*_dot), planned wheel angles beta_*, and m_fl..m_rr (N m, motor side).
+    A trajectory that breaks ``limits`` raises LimitError (``limits=None``: no check).
     """
     traj = _trajectory(experiment, platform, sample_time)
-    q_dot, _ = traj.joint_motion()
+    motion = traj.joint_motion()
+    q_dot = motion[0]
     u = traj.feedforward(params)
+    if limits is not None:
+        check_limits(traj, params, limits, motion=motion, torques=u)
     beta = traj.wheel_angles(q_dot)
     from agvdyn.kinematics import Mode
 
