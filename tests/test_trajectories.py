@@ -241,3 +241,13 @@ def test_trajectory_checks_continuity_and_modes(sequence):
     wrong = Segment("rotation", Mode.ROTATION, bad.t, np.zeros_like(bad.alpha), bad.s, bad.s_dot, bad.s_ddot)
     with pytest.raises(TrajectoryError, match=r"segment 0 \('rotation'\).*not in mode 4"):
         Trajectory((wrong,))
+
+
+def test_per_sample_generalized_coordinates(sequence):
+    rot = sequence.segment == "rotation"
+    steer = sequence.segment == "steer_left"
+    assert sequence.s.shape == (sequence.n_samples, 2)
+    assert np.all(np.isnan(sequence.s[rot, 1])) and not np.any(np.isnan(sequence.s[steer]))
+    np.testing.assert_array_equal(sequence.s[steer], sequence.alpha[steer])  # mode 1: s = alpha
+    qd, _ = sequence.joint_motion()
+    np.testing.assert_allclose(sequence.s_dot[rot, 0], qd[rot, 2])  # mode 4: s_dot = omega

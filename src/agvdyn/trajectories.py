@@ -181,7 +181,8 @@ class Trajectory:
     """A planned motion: segments one after the other on one time grid of step ``sample_time``.
 
     Attributes (per sample, leading axis N): ``t``, ``alpha`` (N, 2), ``mode`` (N,) int,
-    ``segment`` (N,) names; per segment: ``segments[i].s``, ``s_dot``, ``s_ddot``.
+    ``segment`` (N,) names, ``s``, ``s_dot``, ``s_ddot`` (N, 2) (NaN-padded for one-coordinate
+    modes); per segment: ``segments[i].s`` etc. with exactly ``mode.dof`` columns.
     """
 
     segments: tuple[Segment, ...]
@@ -232,6 +233,29 @@ class Trajectory:
     @cached_property
     def segment(self) -> np.ndarray:
         return np.concatenate([np.full(s.n_samples, s.name, dtype=object) for s in self.segments])
+
+    def _stacked(self, key: str) -> np.ndarray:
+        out = np.full((self.n_samples, 2), np.nan)
+        for seg, a, b in zip(self.segments, self.bounds[:-1], self.bounds[1:]):
+            out[a:b, : seg.mode.dof] = getattr(seg, key)
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def s(self) -> np.ndarray:
+        """Generalized coordinates ``(N, 2)`` of every sample in its segment's mode (``mode.coordinates``);
+        NaN in the second column for the one-coordinate modes 3, 4 and straight."""
+        return self._stacked("s")
+
+    @cached_property
+    def s_dot(self) -> np.ndarray:
+        """First derivative of :attr:`s` ``(N, 2)`` (NaN-padded like it)."""
+        return self._stacked("s_dot")
+
+    @cached_property
+    def s_ddot(self) -> np.ndarray:
+        """Second derivative of :attr:`s` ``(N, 2)`` (NaN-padded like it)."""
+        return self._stacked("s_ddot")
 
     def joint_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """Planned ``(q_dot, q_ddot)`` ``(N, 9)`` of every sample, eq. (4) and (20)."""
