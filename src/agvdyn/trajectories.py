@@ -200,9 +200,10 @@ class Trajectory:
             except ValueError as exc:
                 raise TrajectoryError(f"segment {i} ({seg.name!r}): {exc}") from exc
             if i and np.max(np.abs(seg.alpha[0] - self.segments[i - 1].alpha[-1])) > CONTINUITY_TOLERANCE:
+                end = self.segments[i - 1].alpha[-1]
                 raise TrajectoryError(
-                    f"segment {i} ({seg.name!r}) starts at alpha = {tuple(np.round(seg.alpha[0], 6))} but segment "
-                    f"{i - 1} ends at {tuple(np.round(self.segments[i - 1].alpha[-1], 6))}: insert an alignment"
+                    f"segment {i} ({seg.name!r}) starts at alpha = ({seg.alpha[0, 0]:.6g}, {seg.alpha[0, 1]:.6g}) but "
+                    f"segment {i - 1} ends at ({end[0]:.6g}, {end[1]:.6g}): insert an alignment"
                 )
 
     @cached_property
@@ -778,9 +779,10 @@ def _read_yaml_trajectory(path: Path, geom: Geometry, dt: float) -> Trajectory:
                     seg = fourier_segment(name, mode, _series_from(path, f"{where}.fourier", four), geom=geom, dt=dt)
         except (TrajectoryError, ValueError, KeyError, StopIteration) as exc:
             raise TrajectoryError(f"{path}: {where} ({name}): {exc}") from exc
-        if np.max(np.abs(seg.alpha[0] - alpha_now)) > 1e-9:
-            raise TrajectoryError(f"{path}: {where} ({name}) starts at alpha = {tuple(seg.alpha[0])} but the previous "
-                                  f"segment ends at {tuple(alpha_now)}: insert an 'align' segment")
+        if np.max(np.abs(seg.alpha[0] - alpha_now)) > CONTINUITY_TOLERANCE:
+            raise TrajectoryError(
+                f"{path}: {where} ({name}) starts at alpha = ({seg.alpha[0, 0]:.6g}, {seg.alpha[0, 1]:.6g}) but the "
+                f"previous segment ends at ({alpha_now[0]:.6g}, {alpha_now[1]:.6g}): insert an 'align' segment")
         alpha_now = seg.alpha[-1].copy()
         segs.append(seg)
     return Trajectory(tuple(segs), geom, dt, path.stem)
