@@ -16,7 +16,9 @@ and the Coriolis terms of eq. (16), i.e. exactly the identification model's iner
 at ``unit_offset`` from the steering axis along the axle (where the wheel is); the chassis body
 keeps the rest, so that total mass and yaw inertia at alpha = 0 still equal ``m_ch`` and
 ``C_ch + C_l + C_r``, but the inertia now depends on alpha and steering and chassis are coupled
-(the gyroscopic/Coriolis terms the paper neglects, sec. 4).
+(the gyroscopic/Coriolis terms the paper neglects, sec. 4). The spin angular momentum of the
+wheels yawing with their units gives a torque about the horizontal wheel heading, taken by ground
+and bearings: no component in the plane, not modelled.
 
 Integration (why): the tyres make the system stiff (a wheel's reflected inertia ``B_w/r^2 = 12 kg``
 against a slip damping of ``C/v_0 ~ 1e6 N s/m`` has a time constant of ~10 us). Tyre and
