@@ -719,14 +719,17 @@ def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.P
 
 def platform_for(logs: Sequence[Any], platform: Geometry | str | os.PathLike | None) -> Geometry:
     """The geometry to use: the one given, else the ``platform`` of the first log's sidecar, else PROTOTYPE."""
+    from agvdyn.io import sidecar_platform
+
     if isinstance(platform, Geometry):
         return platform
     if platform is not None:
         return read_platform(platform)
     for log in logs:
-        data = (getattr(log, "sidecar", None) or {}).get("platform")
-        if isinstance(data, Mapping) and all(k in data for k in ("l", "b", "a", "r", "i_G")):
-            return Geometry(**{k: data[k] for k in ("l", "b", "a", "r", "i_G")}, name=str(data.get("name", "sidecar")))
+        if getattr(log, "sidecar", None):
+            found = sidecar_platform(log)
+            if found is not None:
+                return found
     return PROTOTYPE
 
 
@@ -825,7 +828,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
 
     Parameters
     ----------
-    logs : path, Log, or a sequence of them (paths are read with :func:`agvdyn.io.read_log`).
+    logs : path, Log, or a sequence of them (paths are read with :func:`agvdyn.io.load_log`).
     platform : Geometry or platform file; default the sidecar's platform, else the prototype.
     fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
     settings : :class:`IdentificationSettings`.

@@ -1,7 +1,12 @@
 """The typer application every command module registers on."""
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Optional
+
 import typer
+
+from agvdyn.platform import PROTOTYPE, Geometry, PlatformFileError, read_platform
 
 app = typer.Typer(
     name="agvdyn",
@@ -16,6 +21,16 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
     """Print an error for the user and return the Exit to raise."""
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     return typer.Exit(code)
+
+
+def platform_option(path: Optional[Path]) -> Geometry:
+    """The platform of a --platform option, or the built-in prototype; a bad file is a clean error."""
+    if path is None:
+        return PROTOTYPE
+    try:
+        return read_platform(path)
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
 
 
 @app.callback()

@@ -9,22 +9,13 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from agvdyn.cli._app import app, fail
+from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.io import LogError, MappingError, load_log, sidecar_platform, write_log
 from agvdyn.io.summary import summarize_log
 from agvdyn.kinematics import MODE_TOLERANCE
-from agvdyn.platform import PROTOTYPE, PlatformFileError, read_platform
+from agvdyn.platform import PlatformFileError
 
 _LOAD_ERRORS = (LogError, MappingError, PlatformFileError)
-
-
-def _platform(path: Optional[Path]):
-    if path is None:
-        return PROTOTYPE
-    try:
-        return read_platform(path)
-    except PlatformFileError as exc:
-        raise fail(str(exc)) from exc
 
 
 @app.command()
@@ -35,7 +26,7 @@ def convert(
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML) for the gear ratio i_G; default: the built-in prototype."),
 ) -> None:
     """Convert a ROS 2 bag or a table to our log schema, so that you can look at what was understood."""
-    geom = _platform(platform)
+    geom = platform_option(platform)
     if out.resolve() == input.resolve():
         raise fail(f"{out}: the output would overwrite the input; choose another --out")
     try:
@@ -67,7 +58,7 @@ def inspect(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Print duration, rate, segments and the motion modes detected over time."""
-    geom = _platform(platform)
+    geom = platform_option(platform)
     try:
         log = load_log(log_path, mapping, geom)
         if platform is None:  # a log that records its platform is inspected with it

@@ -7,19 +7,9 @@ from typing import Optional
 
 import typer
 
-from agvdyn.cli._app import app, fail
+from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.identifiability import QR_TOLERANCE, base_parameters, parse_modes, table1
-from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE, PlatformFileError, read_platform
-
-
-def load_platform_option(path: Optional[Path]):
-    """The platform of a --platform option, or the built-in prototype."""
-    if path is None:
-        return PROTOTYPE
-    try:
-        return read_platform(path)
-    except PlatformFileError as exc:
-        raise fail(str(exc)) from exc
+from agvdyn.platform import PARAMETER_NAMES
 
 
 def _format_row(row) -> str:
@@ -41,7 +31,7 @@ def identifiability(
     seed: int = typer.Option(0, help="Seed of the random motions."),
 ) -> None:
     """Base parameters of motion modes by QR decomposition (paper sec. 6.1, Table 1)."""
-    geom = load_platform_option(platform)
+    geom = platform_option(platform)
     try:
         if modes is not None:
             rows = [base_parameters(geom, parse_modes(modes), n_samples=samples, seed=seed, tolerance=tolerance)]

@@ -10,19 +10,10 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from agvdyn._files import write_atomically
-from agvdyn.cli._app import app, fail
-from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, PlatformFileError, read_parameters, read_platform
+from agvdyn.cli._app import app, fail, platform_option
+from agvdyn.platform import PAPER_PARAMETERS, SAMPLE_TIME, PlatformFileError, read_parameters
 
 _EXPERIMENT_HELP = "identification, lane-change, lateral, or a trajectory file (.csv / .yaml, see docs/simulation.md)."
-
-
-def _platform(path: Optional[Path]):
-    if path is None:
-        return PROTOTYPE
-    try:
-        return read_platform(path)
-    except PlatformFileError as exc:
-        raise fail(str(exc)) from exc
 
 
 def _params(path: Optional[Path], default=PAPER_PARAMETERS):
@@ -82,7 +73,7 @@ def simulate(
         raise fail(str(exc)) from exc
     if ideal_plant:
         sim_settings = replace(sim_settings, plant=sim_settings.plant.ideal())
-    geom = _platform(platform)
+    geom = platform_option(platform)
     true_params = _params(params)
     ctrl_params = _params(controller_params, true_params)
     _output(out)
@@ -125,7 +116,7 @@ def feedforward(
     from agvdyn.simulation import feedforward_table
     from agvdyn.trajectories import Limits, TrajectoryError
 
-    geom = _platform(platform)
+    geom = platform_option(platform)
     p = _params(params)
     _output(out)
     try:
