@@ -12,7 +12,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from agvdyn.dynamics import projected_regressor
 from agvdyn.kinematics import Mode, joint_motion, max_virtual_angle, nominal_steering, steering_from_virtual
@@ -38,7 +37,8 @@ class BaseParameters:
     identifiable: parameters whose columns are independent (one representative per base parameter);
     dependent: parameters regrouped into them; unidentifiable: parameters with no effect at all;
     groups: for each representative, the coefficients of the parameters it stands for
-    (``p_B = sum coefficient * p``); relative_r: |R_ii| / ||theta_i|| of every column.
+    (``p_B = sum coefficient * p``); combination_of: for each dependent parameter, the
+    representatives its column is a combination of; relative_r: |R_ii| / ||theta_i|| of every column.
     """
 
     modes: tuple[Mode, ...]
@@ -47,6 +47,7 @@ class BaseParameters:
     dependent: tuple[str, ...]
     unidentifiable: tuple[str, ...]
     groups: dict[str, dict[str, float]]
+    combination_of: dict[str, tuple[str, ...]]
     relative_r: dict[str, float]
     tolerance: float
 
@@ -58,6 +59,7 @@ class BaseParameters:
             "dependent": list(self.dependent),
             "unidentifiable": list(self.unidentifiable),
             "groups": self.groups,
+            "combination_of": {k: list(v) for k, v in self.combination_of.items()},
             "relative_r": self.relative_r,
             "tolerance": self.tolerance,
         }
@@ -91,37 +93,63 @@ def random_mode_regressor(geom: Geometry, mode: Mode, n_samples: int, rng: np.ra
     return projected_regressor(geom, mode, alpha, q_dot, q_ddot, epsilon=epsilon).reshape(-1, len(PARAMETER_NAMES))
 
 
+def triangular_factor(Y: np.ndarray, chunk: int = 8192) -> np.ndarray:
+    """R of ``Y = Q R`` ``(n, n)`` by a tall-skinny QR: QR of row blocks, then of the stacked R's.
+
+    Same R (up to row signs) as one Householder QR of Y, fast for millions of rows.
+    """
+    parts = [np.linalg.qr(Y[i:i + chunk], mode="r") for i in range(0, Y.shape[0], chunk)]
+    return np.linalg.qr(np.vstack(parts), mode="r")
+
+
 def base_parameters_of(regressor: np.ndarray, *, tolerance: float = QR_TOLERANCE,
-                       names: Sequence[str] = PARAMETER_NAMES, modes: tuple[Mode, ...] = ()) -> BaseParameters:
-    """Base parameters of a stacked regressor ``(rows, 11)`` by QR without pivoting (Gautier 1991)."""
+                       names: Sequence[str] = PARAMETER_NAMES, order: Sequence[str] | None = None,
+                       modes: tuple[Mode, ...] = ()) -> BaseParameters:
+    """Base parameters of a stacked regressor ``(rows, n)`` by QR without pivoting (Gautier 1991).
+
+    Columns are scaled to unit norm and taken in ``order`` (names; default: as given, which is
+    eq. (18)); a column whose part orthogonal to the columns before it is at most ``tolerance`` is
+    dependent, and the first column of each group becomes the group's representative.
+    """
     Y = np.asarray(regressor, dtype=float)
+    names = list(names)
     if Y.ndim != 2 or Y.shape[1] != len(names):
         raise ValueError(f"regressor of shape {Y.shape}: expected (rows, {len(names)})")
     if not tolerance > 0:
         raise ValueError(f"tolerance={tolerance!r}: expected > 0")
-    norms = np.linalg.norm(Y, axis=0)
+    rank_of = {n: i for i, n in enumerate(order)} if order is not None else {}
+    perm = sorted(range(len(names)), key=lambda i: rank_of.get(names[i], len(rank_of)))
+    norms = np.sqrt(np.einsum("ij,ij->j", Y, Y))
     scale = np.where(norms > 0, norms, 1.0)
-    R = scipy.linalg.qr(Y / scale, mode="r")[0]
-    diag = np.abs(np.diag(R[: Y.shape[1], : Y.shape[1]]))
-    relative = np.where(norms > 0, diag, 0.0)
-    indep = np.flatnonzero(relative > tolerance)
-    dep = np.flatnonzero(relative <= tolerance)
-    zero = [j for j in dep if norms[j] <= 1e-12 * max(norms.max(), 1e-300)]
-    regrouped = [j for j in dep if j not in zero]
+    R = triangular_factor((Y / scale)[:, perm])
+    relative = np.zeros(len(names))
+    relative[perm] = np.abs(np.diag(R))
+    relative[norms == 0] = 0.0
+    position = {j: k for k, j in enumerate(perm)}
+    indep = [j for j in perm if relative[j] > tolerance]
+    zero = sorted(j for j in range(len(names)) if norms[j] == 0)
+    regrouped = sorted(j for j in range(len(names)) if relative[j] <= tolerance and norms[j] > 0)
     groups = {names[j]: {names[j]: 1.0} for j in indep}
-    if regrouped and len(indep):
-        kappa = np.linalg.lstsq(Y[:, indep], Y[:, regrouped], rcond=None)[0]
-        for a, j in enumerate(indep):
-            for b, d in enumerate(regrouped):
-                if abs(kappa[a, b]) > 1e-8:
+    combination: dict[str, tuple[str, ...]] = {}
+    if regrouped and indep:
+        R_i = R[:, [position[j] for j in indep]]
+        kappa_scaled = np.linalg.lstsq(R_i, R[:, [position[d] for d in regrouped]], rcond=None)[0]
+        kappa = kappa_scaled / scale[indep][:, None] * scale[regrouped][None, :]
+        for b, d in enumerate(regrouped):
+            members = []
+            for a, j in enumerate(indep):
+                if abs(kappa_scaled[a, b]) > 1e-3:
                     groups[names[j]][names[d]] = float(np.round(kappa[a, b], 12))
+                    members.append(j)
+            combination[names[d]] = tuple(names[j] for j in sorted(members))
     return BaseParameters(
         modes=modes,
         rank=len(indep),
-        identifiable=tuple(names[j] for j in indep),
+        identifiable=tuple(names[j] for j in sorted(indep)),
         dependent=tuple(names[j] for j in regrouped),
         unidentifiable=tuple(names[j] for j in zero),
         groups=groups,
+        combination_of=combination,
         relative_r={names[j]: float(relative[j]) for j in range(len(names))},
         tolerance=tolerance,
     )

@@ -30,6 +30,7 @@ import pandas as pd
 import scipy.linalg
 
 from agvdyn.dynamics import N_P, projected_input, projected_regressor
+from agvdyn.identifiability import base_parameters_of, triangular_factor
 from agvdyn.kinematics import MODE_TOLERANCE, Mode, detect_mode, kinematic_model, odometry
 from agvdyn.platform import (
     EPSILON,
@@ -490,49 +491,17 @@ def _column_norms(A: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->j", A, A))
 
 
-def _triangular_factor(A: np.ndarray, chunk: int = 8192) -> np.ndarray:
-    """R of ``A = Q R`` (n x n) by a tall-skinny QR: QR of row blocks, then of the stacked R's.
-
-    Same R (up to row signs) as one Householder QR of A, in a fraction of the time for
-    hundreds of thousands of rows (no copy of A into Fortran order, cache-sized blocks).
-    """
-    parts = [np.linalg.qr(A[i:i + chunk], mode="r") for i in range(0, A.shape[0], chunk)]
-    return np.linalg.qr(np.vstack(parts), mode="r")
-
-
 def dependent_parameters(A: np.ndarray, names: Sequence[str], *, tolerance: float = 1e-6) -> list[Dependency]:
     """Parameters whose columns of the stacked regressor are not linearly independent (sec. 6.1).
 
-    Columns are scaled to unit norm (eq. 25) and accepted one by one in the paper's order of
-    representatives (m_ch, C_ch, d_vw, d_cw, C_l, ..., B_w); a column whose part orthogonal to
-    the accepted ones is smaller than ``tolerance`` is dependent. The geometry of the columns is
-    taken from the triangular factor R of ``A = Q R`` (Q orthonormal), so the check costs an
-    11 x 11 problem after one QR of the stacked regressor (Gautier 1991).
+    The QR test of :func:`agvdyn.identifiability.base_parameters_of` with the columns taken in
+    the paper's order of representatives (m_ch, C_ch, d_vw, d_cw, C_l, ..., B_w), so that the
+    parameter named as not identifiable is the one the paper treats as dependent.
     """
     names = list(names)
-    norms = _column_norms(A)
-    scale = np.where(norms > 0, norms, 1.0)
-    R = _triangular_factor(A / scale)
-    order = sorted(range(len(names)), key=lambda i: _RANK_ORDER.index(names[i]) if names[i] in _RANK_ORDER else 99)
-    accepted: list[int] = []
-    out: list[Dependency] = []
-    for i in order:
-        if norms[i] == 0:
-            out.append(Dependency(names[i], (), 0.0))
-            continue
-        col = R[:, i]
-        if accepted:
-            basis = R[:, accepted]
-            coef, *_ = np.linalg.lstsq(basis, col, rcond=None)
-            residual = float(np.linalg.norm(col - basis @ coef))
-        else:
-            coef, residual = np.zeros(0), float(np.linalg.norm(col))
-        if residual < tolerance:
-            big = sorted((j for j, c in zip(accepted, coef) if abs(c) > 1e-3))
-            big = [names[j] for j in big]
-            out.append(Dependency(names[i], tuple(big), residual))
-        else:
-            accepted.append(i)
+    base = base_parameters_of(A, names=names, order=_RANK_ORDER, tolerance=tolerance)
+    out = [Dependency(n, (), 0.0) for n in base.unidentifiable]
+    out += [Dependency(n, base.combination_of.get(n, ()), base.relative_r[n]) for n in base.dependent]
     return sorted(out, key=lambda d: names.index(d.name))
 
 
@@ -584,7 +553,7 @@ class LeastSquares(Estimator):
             raise ValueError(f"columns {np.flatnonzero(norms == 0).tolist()} of the regressor are zero")
         # QR of [Theta_1,w | tau]: R_aug = [[R, Q^T tau], [0, |r|]] gives the solution, the residual
         # norm and (Theta_1,w^T Theta_1,w)^-1 = R^-1 R^-T without forming the normal equations.
-        R_aug = _triangular_factor(np.column_stack([A / norms, y]))
+        R_aug = triangular_factor(np.column_stack([A / norms, y]))
         R, qty, res_norm = R_aug[:n, :n], R_aug[:n, n], abs(R_aug[n, n])
         pw = scipy.linalg.solve_triangular(R, qty)
         R_inv = scipy.linalg.solve_triangular(R, np.eye(n))
@@ -792,7 +761,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]
     if len(param_cols) < len(free):
         cond_with_offsets = float(est.condition_number_)
-        R = _triangular_factor(A1[:, param_cols] / _column_norms(A1[:, param_cols]))
+        R = triangular_factor(A1[:, param_cols] / _column_norms(A1[:, param_cols]))
         sv = np.linalg.svd(R, compute_uv=False)
         cond = float((sv[0] / sv[-1]) ** 2)
         sv_raw = np.linalg.svd(R * _column_norms(A1[:, param_cols]), compute_uv=False)
