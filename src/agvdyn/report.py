@@ -21,7 +21,24 @@ from agvdyn import plots
 from agvdyn._files import write_text_atomically
 from agvdyn.platform import PAPER_CONDITION_NUMBER, PAPER_PARAMETERS, PAPER_STD, PARAMETER_NAMES, PARAMETER_UNITS, Parameters
 
-__all__ = ["parameter_table", "report_html", "write_report", "figure_png"]
+__all__ = ["parameter_table", "reference_parameters", "report_html", "write_report", "figure_png"]
+
+
+def reference_parameters(logs) -> tuple[Parameters, dict[str, float], str]:
+    """What to compare identified parameters with: the simulator's true parameters from a log
+    sidecar (``true_parameters``) when present, else Table 2 of the paper.
+
+    Returns (parameters, standard deviations, label).
+    """
+    for log in logs:
+        side = getattr(log, "sidecar", None) or {}
+        for key in ("true_parameters", "parameters"):
+            data = side.get(key)
+            if isinstance(data, dict):
+                values = {n: (v.get("value") if isinstance(v, dict) else v) for n, v in data.items()}
+                if all(isinstance(values.get(n), (int, float)) for n in PARAMETER_NAMES):
+                    return Parameters(**{n: values[n] for n in PARAMETER_NAMES}), {}, f"simulator truth: sidecar {key}"
+    return PAPER_PARAMETERS, dict(PAPER_STD), "paper, Table 2"
 
 
 def parameter_table(identification, reference: Parameters = PAPER_PARAMETERS,

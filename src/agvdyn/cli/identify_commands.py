@@ -19,7 +19,7 @@ from agvdyn.identification import (
     load_logs,
     platform_for,
 )
-from agvdyn.platform import PAPER_PARAMETERS, PAPER_STD, PARAMETER_NAMES, PARAMETER_UNITS, Parameters, read_parameters
+from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, read_parameters
 from agvdyn.signals import FilterSettings
 
 _FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. "
@@ -165,19 +165,6 @@ def validate(
     Console().print(table)
 
 
-def _reference(logs) -> tuple[Parameters, dict[str, float], str]:
-    """The simulator's true parameters from a sidecar when present, else Table 2."""
-    for log in logs:
-        side = getattr(log, "sidecar", None) or {}
-        for key in ("true_parameters", "parameters"):
-            data = side.get(key)
-            if isinstance(data, dict):
-                values = {n: (v.get("value") if isinstance(v, dict) else v) for n, v in data.items()}
-                if all(isinstance(values.get(n), (int, float)) for n in PARAMETER_NAMES):
-                    return Parameters(**{n: values[n] for n in PARAMETER_NAMES}), {}, f"simulator truth: sidecar {key}"
-    return PAPER_PARAMETERS, dict(PAPER_STD), "paper, Table 2"
-
-
 @app.command()
 def report(
     ident_logs: list[Path] = typer.Option(..., "--ident", help="Identification log (repeatable)."),
@@ -196,7 +183,7 @@ def report(
     offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets."),
 ) -> None:
     """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
-    from agvdyn.report import write_report
+    from agvdyn.report import reference_parameters, write_report
     from agvdyn.validation import validate as validate_log
 
     fixed = _fixed(fix)
@@ -210,7 +197,7 @@ def report(
             val = validate_log(val_log, ident.parameters, geometry, settings=settings)
     except ValueError as exc:
         raise fail(str(exc)) from exc
-    reference, reference_std, label = _reference(loaded)
+    reference, reference_std, label = reference_parameters(loaded)
     inputs: dict[str, Any] = {"fixed": ", ".join(f"{k}={v}" for k, v in fixed.items()) or "none"}
     try:
         if params_out is not None:
