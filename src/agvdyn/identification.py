@@ -71,6 +71,7 @@ __all__ = [
     "log_equations",
     "stacked_system",
     "dependent_parameters",
+    "variance_inflation",
     "identify",
     "fit_blocks",
     "load_logs",
@@ -167,6 +168,15 @@ class IdentificationSettings:
     rest_speed : float
         Logs without ``segment`` column: a row whose wheel surface speed not explained by
         steering is below this (m/s) is taken as mode 1 (at rest), see ``_detected_labels``.
+    max_inflation : float
+        A parameter whose variance inflation factor ``[(Theta_1,w^T Theta_1,w)^-1]_jj`` (unit-norm
+        columns) exceeds this is refused as nearly a combination of others. Well-excited data
+        give a few units (about 5 on the identification sequence); the lane change alone gives
+        300 to 1,200 for the steering friction.
+    max_relative_std : float
+        A parameter whose standard deviation exceeds this fraction of its magnitude is refused
+        as not excited enough (the paper's own worst is 0.28, d_vr in Table 2). ``inf`` switches
+        both quality checks off.
     """
 
     filter: FilterSettings = FilterSettings()
@@ -181,6 +191,8 @@ class IdentificationSettings:
     rank_tolerance: float = 1e-6
     sample_jitter: float = 0.05
     rest_speed: float = 0.01
+    max_inflation: float = 100.0
+    max_relative_std: float = 0.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "filtering", Filtering(self.filtering))
@@ -189,6 +201,10 @@ class IdentificationSettings:
             value = getattr(self, key)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"identification setting {key}={value!r}: expected a finite number >= 0")
+        for key in ("max_inflation", "max_relative_std"):
+            value = getattr(self, key)
+            if not isinstance(value, (int, float)) or math.isnan(value) or value <= 0:
+                raise ValueError(f"identification setting {key}={value!r}: expected a number > 0 (inf: no check)")
         if self.epsilon <= 0 or self.mode_tolerance <= 0:
             raise ValueError("identification settings epsilon and mode_tolerance must be > 0")
         if self.segments is not None:
@@ -214,6 +230,8 @@ class IdentificationSettings:
             "torque_offsets": self.torque_offsets,
             "stiction_guard": self.stiction_guard,
             "rest_speed": self.rest_speed,
+            "max_inflation": self.max_inflation,
+            "max_relative_std": self.max_relative_std,
         }
 
 
@@ -459,18 +477,27 @@ def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True, o
 
 @dataclass(frozen=True)
 class Dependency:
-    """A parameter whose column is (numerically) a combination of the columns of others."""
+    """A parameter the data do not determine: its column is (numerically or nearly) a combination
+    of the columns of others, or its estimate is dominated by noise."""
 
     name: str
     combination_of: tuple[str, ...]
     relative_residual: float
+    inflation: float = math.nan
+    relative_std: float = math.nan
 
     def describe(self) -> str:
-        if not self.combination_of:
+        if math.isfinite(self.relative_std):
+            how = f"its standard deviation is {100 * self.relative_std:.0f} % of its value: the data hardly excite it"
+        elif math.isfinite(self.inflation):
+            how = (f"its regressor column is nearly a combination of the others (variance inflation "
+                   f"{self.inflation:.3g})")
+        elif not self.combination_of:
             how = "its regressor column is zero: the data do not excite it"
         else:
             how = f"its regressor column is a combination of those of {', '.join(self.combination_of)}"
-        return f"{self.name} ({how}; excited by {EXCITATION[self.name]})"
+        excited_by = EXCITATION.get(self.name, "steering reversals in every segment (motor-torque offset)")
+        return f"{self.name} ({how}; excited by {excited_by})"
 
 
 class UnidentifiableError(ValueError):
@@ -503,6 +530,16 @@ def dependent_parameters(A: np.ndarray, names: Sequence[str], *, tolerance: floa
     out = [Dependency(n, (), 0.0) for n in base.unidentifiable]
     out += [Dependency(n, base.combination_of.get(n, ()), base.relative_r[n]) for n in base.dependent]
     return sorted(out, key=lambda d: names.index(d.name))
+
+
+def variance_inflation(A: np.ndarray) -> np.ndarray:
+    """Variance inflation factors ``diag((A_w^T A_w)^-1)`` of the unit-norm columns of A.
+
+    1 for a column orthogonal to the others, large when it is nearly a combination of them.
+    """
+    R = triangular_factor(A / _column_norms(A))
+    R_inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]))
+    return np.einsum("ij,ij->i", R_inv, R_inv)
 
 
 class Estimator(ABC):
@@ -755,7 +792,19 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     missing = dependent_parameters(A1, free, tolerance=settings.rank_tolerance)
     if missing:
         raise UnidentifiableError(missing)
+    inflation = variance_inflation(A1)
+    collinear = [Dependency(n, (), math.nan, inflation=float(v)) for n, v in zip(free, inflation)
+                 if v > settings.max_inflation and n in PARAMETER_NAMES]
+    if collinear:
+        raise UnidentifiableError(collinear, f"poorly conditioned data (variance inflation above "
+                                             f"{settings.max_inflation:g}): ")
     est = (estimator if estimator is not None else LeastSquares()).fit(A1, y1)
+    noisy = [Dependency(n, (), math.nan, relative_std=float(sd / abs(v)))
+             for n, v, sd in zip(free, est.coef_, est.std_)
+             if n in PARAMETER_NAMES and sd > settings.max_relative_std * abs(v)]
+    if noisy:
+        raise UnidentifiableError(noisy, f"weakly excited data (standard deviation above "
+                                         f"{100 * settings.max_relative_std:g} % of the value): ")
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
     # columns are reported separately
     param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]

@@ -47,12 +47,13 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
-              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0) -> IdentificationSettings:
+              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
+              max_inflation: float = 100.0, max_relative_std: float = 0.5) -> IdentificationSettings:
     try:
         return IdentificationSettings(
             filter=FilterSettings(cutoff=cutoff, order=order), filtering=Filtering(filtering),
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
-            stiction_guard=guard,
+            stiction_guard=guard, max_inflation=max_inflation, max_relative_std=max_relative_std,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
         raise fail(f"{exc} (filtering must be one of {[f.value for f in Filtering]})") from exc
@@ -94,11 +95,14 @@ def identify(
     stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
     offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets with the parameters."),
     segments: Optional[str] = typer.Option(None, help="Comma-separated segment names to use; default: every segment with a mode."),
+    max_inflation: float = typer.Option(100.0, help="Refuse parameters whose variance inflation factor exceeds this (inf: no check)."),
+    max_relative_std: float = typer.Option(0.5, help="Refuse parameters whose std exceeds this fraction of the value (inf: no check)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file."""
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard)
+    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
+                         max_inflation, max_relative_std)
     loaded, geometry = _load(logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
