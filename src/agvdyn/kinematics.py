@@ -113,11 +113,13 @@ def wheel_headings(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def constraint_matrix_into(l, b, a, r, alpha_l, alpha_r, A):  # pragma: no cover - compiled
+def constraint_matrix_into(l, b, a, radii, alpha_l, alpha_r, A):  # pragma: no cover - compiled
     """A(alpha) ``(8, 9)`` of eq. (1)-(2) for one configuration, written into ``A``.
 
     Row i (lateral) ``e_lat . (v + omega z x c_i)``; row 4+i (longitudinal)
-    ``e_long . (v + omega z x c_i) - s_i a (omega + theta_i_dot) - r beta_i_dot``.
+    ``e_long . (v + omega z x c_i) - s_i a (omega + theta_i_dot) - r_i beta_i_dot`` with the
+    rolling radii ``radii`` (4,) (all r for the model; a simulated vehicle's radius errors
+    otherwise); the rows are the slip velocities of the contact points.
     """
     A[:, :] = 0.0
     for i in range(4):
@@ -131,14 +133,15 @@ def constraint_matrix_into(l, b, a, r, alpha_l, alpha_r, A):  # pragma: no cover
         A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
         A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = c, s, -c * cy + s * cx - side * a
         A[4 + i, 3 if left else 4] = -side * a * sigma
-        A[4 + i, 5 + i] = -r
+        A[4 + i, 5 + i] = -radii[i]
 
 
 @numba.njit(cache=True)
 def _constraint_matrices(l, b, a, r, alpha):  # pragma: no cover - compiled
     A = np.empty((alpha.shape[0], 8, 9))
+    radii = np.full(4, r)
     for j in range(alpha.shape[0]):
-        constraint_matrix_into(l, b, a, r, alpha[j, 0], alpha[j, 1], A[j])
+        constraint_matrix_into(l, b, a, radii, alpha[j, 0], alpha[j, 1], A[j])
     return A
 
 
@@ -158,8 +161,9 @@ def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot):  # pragma: no cover - com
     A = np.empty((8, 9))
     M = np.empty((3, 3))
     g = np.empty(3)
+    radii = np.full(4, r)
     for j in range(n):
-        constraint_matrix_into(l, b, a, r, alpha[j, 0], alpha[j, 1], A)
+        constraint_matrix_into(l, b, a, radii, alpha[j, 0], alpha[j, 1], A)
         M[:, :] = 0.0
         g[:] = 0.0
         for row in range(8):

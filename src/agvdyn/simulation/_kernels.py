@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from agvdyn.kinematics import constraint_matrix_into
+
 # Indices of the constant vector handed to the compiled code.
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
  _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
@@ -95,24 +97,6 @@ def _bias(c, alpha, v, out):
 
 
 @njit(cache=True)
-def _constraint_matrix(c, alpha, A):
-    """A(alpha) (8, 9) of eq. (1)-(2): rows 0-3 lateral, 4-7 longitudinal slip of fl, rl, fr, rr."""
-    A[:, :] = 0.0
-    a = c[_A]
-    for i in range(4):
-        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
-        ct, st = math.cos(th), math.sin(th)
-        A[i, 0] = -st
-        A[i, 1] = ct
-        A[i, 2] = st * cy + ct * cx
-        A[4 + i, 0] = ct
-        A[4 + i, 1] = st
-        A[4 + i, 2] = -ct * cy + st * cx - s * a
-        A[4 + i, 3 + side] = -s * a * h
-        A[4 + i, 5 + i] = -c[_RW + i]
-
-
-@njit(cache=True)
 def _coulomb(c, v, d_c):
     """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0)."""
     mode = c[_COUL]
@@ -185,7 +169,7 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
     alpha = pos[3:5]
     _mass_matrix(c, alpha, M)
     _bias(c, alpha, vel, h)
-    _constraint_matrix(c, alpha, A)
+    constraint_matrix_into(c[_L], c[_B], c[_A], c[_RW:_RW + 4], alpha[0], alpha[1], A)
     # slip velocities and tyre secant coefficients (lagged)
     for j in range(8):
         t = 0.0
