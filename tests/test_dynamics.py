@@ -156,3 +156,26 @@ def test_bad_shapes_are_refused():
         regressor(np.zeros((3, 9)), np.zeros((3, 8)))
     with pytest.raises(ValueError, match="s_dot"):
         feedforward_torques(PROTOTYPE, PAPER_PARAMETERS, Mode.CAR_LIKE, np.zeros((2, 2)), np.zeros((2, 1)), np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("mode", [Mode.CAR_LIKE, Mode.STRAIGHT, Mode.ROTATION])
+def test_parking_feedforward_does_not_push_the_chassis_where_it_could_move(mode):
+    """Steering at rest through a configuration where the axle lines meet (mode 1 passing a mode-2/4
+    configuration): front and rear wheels of a side roll alike in the chassis motion and opposite
+    in steering, so the minimum-norm steering torques put no force on the chassis direction."""
+    geom, p = PROTOTYPE, PAPER_PARAMETERS
+    rng = np.random.default_rng(11)
+    alpha = configurations(geom, mode, 20, rng)
+    u = feedforward_torques(geom, p, Mode.PARKING, alpha, rng.normal(size=(20, 2)), rng.normal(size=(20, 2)))
+    chassis = admissible_basis(geom, mode, alpha)[:, :, -1]
+    assert np.abs(np.einsum("ni,ni->n", chassis, u @ input_matrix(geom).T)).max() < 1e-9
+
+
+def test_parking_feedforward_at_the_lateral_stops_pushes_sideways():
+    """The exception: at alpha = (-pi/2, pi/2) the wheel patterns coincide (h_y = (h_l + h_r)/a),
+    so steering at the stops is a sideways force on the chassis (why mode 3 is entered at rest)."""
+    geom, p = PROTOTYPE, PAPER_PARAMETERS
+    alpha = configurations(geom, Mode.LATERAL, 5, np.random.default_rng(2))
+    u = feedforward_torques(geom, p, Mode.PARKING, alpha, np.ones((5, 2)), np.ones((5, 2)))
+    lateral = admissible_basis(geom, Mode.LATERAL, alpha)[:, :, -1]
+    assert np.abs(np.einsum("ni,ni->n", lateral, u @ input_matrix(geom).T)).min() > 1.0
