@@ -19,6 +19,7 @@ from agvdyn.kinematics import (
     as_alpha,
     car_like_model_into,
     check_mode,
+    icr_state,
     joint_motion,
     kinematic_model,
     max_virtual_angle,
@@ -136,12 +137,7 @@ def _project_car_like(l, b, a, r, limit, alpha, qd, qdd, epsilon, tolerance, out
     tanh_a, tanh_w = np.empty(2), np.empty(4)
     bad = -1
     for j in range(alpha.shape[0]):
-        sl, cl = np.sin(alpha[j, 0]), np.cos(alpha[j, 0])
-        sr, cr = np.sin(alpha[j, 1]), np.cos(alpha[j, 1])
-        av_l = np.arctan2(sl, cl + k * sl)
-        av_r = np.arctan2(sr, cr - k * sr)
-        residual = (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
-        av = 0.5 * (av_l + av_r)
+        av, residual = icr_state(k, alpha[j, 0], alpha[j, 1])
         if bad < 0 and (abs(residual) > tolerance or abs(av) > limit + tolerance):
             bad = j
         av = min(max(av, -limit), limit)

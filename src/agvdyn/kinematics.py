@@ -249,15 +249,32 @@ def _check_virtual(geom: Geometry, alpha_v) -> np.ndarray:
     return av
 
 
-def _virtual_per_side(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
-    k = geom.b / geom.l
-    s, c = np.sin(alpha), np.cos(alpha)
-    return np.stack([np.arctan2(s[:, 0], c[:, 0] + k * s[:, 0]), np.arctan2(s[:, 1], c[:, 1] - k * s[:, 1])], axis=1)
+@numba.njit(cache=True)
+def icr_state(k, alpha_l, alpha_r):  # pragma: no cover - compiled
+    """(alpha_v, residual) of one configuration, ``k = b/l``: inverse of eq. (8) per side, their
+    mean, and the ICR residual of eq. (9) (difference of the two sides' values modulo pi)."""
+    sl, cl = np.sin(alpha_l), np.cos(alpha_l)
+    sr, cr = np.sin(alpha_r), np.cos(alpha_r)
+    av_l = np.arctan2(sl, cl + k * sl)
+    av_r = np.arctan2(sr, cr - k * sr)
+    return 0.5 * (av_l + av_r), (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
+
+
+@numba.njit(cache=True)
+def _icr_states(k, alpha):  # pragma: no cover - compiled
+    out = np.empty((alpha.shape[0], 2))
+    for j in range(alpha.shape[0]):
+        out[j, 0], out[j, 1] = icr_state(k, alpha[j, 0], alpha[j, 1])
+    return out
+
+
+def _icr(geom: Geometry, alpha) -> np.ndarray:
+    return _icr_states(geom.b / geom.l, np.ascontiguousarray(as_alpha(alpha)))
 
 
 def virtual_from_steering(geom: Geometry, alpha) -> np.ndarray:
     """Virtual steering angle alpha_v ``(N,)``: inverse of eq. (8), mean of both sides' values."""
-    return _virtual_per_side(geom, as_alpha(alpha)).mean(axis=1)
+    return _icr(geom, alpha)[:, 0]
 
 
 def icr_residual(geom: Geometry, alpha) -> np.ndarray:
@@ -266,9 +283,7 @@ def icr_residual(geom: Geometry, alpha) -> np.ndarray:
     Difference of the virtual angles implied by the left and the right side, taken modulo pi
     (the axle lines are lines, not rays). Zero in modes 2 and 4.
     """
-    av = _virtual_per_side(geom, as_alpha(alpha))
-    d = av[:, 0] - av[:, 1]
-    return (d + math.pi / 2) % math.pi - math.pi / 2
+    return _icr(geom, alpha)[:, 1]
 
 
 def nominal_steering(geom: Geometry, mode: Mode) -> np.ndarray | None:
@@ -295,9 +310,8 @@ def detect_mode(geom: Geometry, alpha, tolerance: float = MODE_TOLERANCE) -> np.
     if not tolerance > 0:
         raise ValueError(f"tolerance={tolerance!r}: expected > 0 rad")
     mode = np.full(alpha.shape[0], int(Mode.PARKING), dtype=np.int8)
-    car = (np.abs(icr_residual(geom, alpha)) <= tolerance) & (
-        np.abs(virtual_from_steering(geom, alpha)) <= max_virtual_angle(geom) + tolerance
-    )
+    icr = _icr(geom, alpha)
+    car = (np.abs(icr[:, 1]) <= tolerance) & (np.abs(icr[:, 0]) <= max_virtual_angle(geom) + tolerance)
     mode[car] = Mode.CAR_LIKE
     for m in (Mode.STRAIGHT, Mode.ROTATION, Mode.LATERAL):
         near = np.all(np.abs(alpha - nominal_steering(geom, m)) <= tolerance, axis=1)
@@ -315,8 +329,8 @@ def check_mode(geom: Geometry, mode: Mode, alpha: np.ndarray, tolerance: float =
         err = np.max(np.abs(alpha - nominal), axis=1)
         what = f"alpha = {tuple(np.round(nominal, 6))}"
     else:
-        err = np.abs(icr_residual(geom, alpha))
-        err = np.where(np.abs(virtual_from_steering(geom, alpha)) <= max_virtual_angle(geom) + tolerance, err, np.inf)
+        icr = _icr(geom, alpha)
+        err = np.where(np.abs(icr[:, 0]) <= max_virtual_angle(geom) + tolerance, np.abs(icr[:, 1]), np.inf)
         what = "the ICR relation of eq. (6)-(8)"
     bad = err > tolerance
     if bad.any():

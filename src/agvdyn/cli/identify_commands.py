@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 from rich.console import Console
@@ -24,6 +24,32 @@ from agvdyn.signals import FilterSettings
 
 _FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. "
              "'--fix none' estimates all eleven (needs car-like motion in the logs).")
+
+
+# Options shared by identify, validate and report: one declaration each, so the commands agree.
+PlatformOpt = Annotated[Optional[Path], typer.Option(
+    help="Platform file (YAML); default: the log sidecar's platform, else the prototype.")]
+FixOpt = Annotated[Optional[list[str]], typer.Option("--fix", help=_FIX_HELP)]
+MappingOpt = Annotated[Optional[Path], typer.Option(help="Mapping file for logs not in our schema (tables, ROS 2 bags).")]
+FilteringOpt = Annotated[str, typer.Option(
+    help="parallel (filter regressor columns and torques alike) or literal (the paper's wording).")]
+CutoffOpt = Annotated[float, typer.Option(help="Cut-off of the zero-phase Butterworth low-pass, rad/s.")]
+OrderOpt = Annotated[int, typer.Option(help="Order of the Butterworth prototype.")]
+StictionOpt = Annotated[float, typer.Option(
+    help="Rows of x_ch, y_ch, gamma_ch with |generalized velocity| below this are dropped (m/s, rad/s).")]
+SteeringStictionOpt = Annotated[float, typer.Option(
+    help="The same for the steering coordinates alpha_l, alpha_r, alpha_v (rad/s).")]
+GuardOpt = Annotated[float, typer.Option(
+    help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off).")]
+OffsetsOpt = Annotated[bool, typer.Option("--offsets/--no-offsets",
+                                          help="Estimate constant motor-torque offsets with the parameters.")]
+SegmentsOpt = Annotated[Optional[str], typer.Option(
+    help="Comma-separated segment names to use; default: every segment with a mode.")]
+MaxInflationOpt = Annotated[float, typer.Option(
+    help="Refuse parameters whose variance inflation factor exceeds this (inf: no check).")]
+MaxRelativeStdOpt = Annotated[float, typer.Option(
+    help="Refuse parameters whose std exceeds this fraction of the value (inf: no check).")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON.")]
 
 
 def _fixed(items: Optional[list[str]]) -> dict[str, float]:
@@ -84,20 +110,20 @@ def _parameter_table(ident) -> Table:
 def identify(
     logs: list[Path] = typer.Argument(..., metavar="LOG...", help="Identification logs (Parquet/CSV in our schema, or with --mapping)."),
     out: Path = typer.Option(..., "--out", "-o", help="Parameter file to write (.yaml, or .json)."),
-    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the log sidecar's platform, else the prototype."),
-    fix: Optional[list[str]] = typer.Option(None, "--fix", help=_FIX_HELP),
-    mapping: Optional[Path] = typer.Option(None, help="Mapping file for logs not in our schema (tables, ROS 2 bags)."),
-    filtering: str = typer.Option("parallel", help="parallel (filter regressor columns and torques alike) or literal (the paper's wording)."),
-    cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase Butterworth low-pass, rad/s."),
-    order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Rows of x_ch, y_ch, gamma_ch with |generalized velocity| below this are dropped (m/s, rad/s)."),
-    steering_stiction: float = typer.Option(0.1, help="The same for the steering coordinates alpha_l, alpha_r, alpha_v (rad/s)."),
-    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
-    offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets with the parameters."),
-    segments: Optional[str] = typer.Option(None, help="Comma-separated segment names to use; default: every segment with a mode."),
-    max_inflation: float = typer.Option(100.0, help="Refuse parameters whose variance inflation factor exceeds this (inf: no check)."),
-    max_relative_std: float = typer.Option(0.5, help="Refuse parameters whose std exceeds this fraction of the value (inf: no check)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    platform: PlatformOpt = None,
+    fix: FixOpt = None,
+    mapping: MappingOpt = None,
+    filtering: FilteringOpt = "parallel",
+    cutoff: CutoffOpt = 40.0,
+    order: OrderOpt = 4,
+    stiction: StictionOpt = 0.05,
+    steering_stiction: SteeringStictionOpt = 0.1,
+    stiction_guard: GuardOpt = 2.0,
+    offsets: OffsetsOpt = True,
+    segments: SegmentsOpt = None,
+    max_inflation: MaxInflationOpt = 100.0,
+    max_relative_std: MaxRelativeStdOpt = 0.5,
+    as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file."""
     fixed = _fixed(fix)
@@ -137,15 +163,15 @@ def _nan_safe(x: float) -> str:
 def validate(
     log: Path = typer.Argument(..., metavar="LOG", help="Validation log not used for identification (e.g. the lane change)."),
     params: Path = typer.Option(..., "--params", help="Parameter file (YAML/JSON) to validate."),
-    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the log sidecar's platform, else the prototype."),
-    mapping: Optional[Path] = typer.Option(None, help="Mapping file for logs not in our schema."),
-    filtering: str = typer.Option("parallel", help="parallel or literal, as for identify."),
-    cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase low-pass, rad/s."),
-    order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
-    steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
-    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    platform: PlatformOpt = None,
+    mapping: MappingOpt = None,
+    filtering: FilteringOpt = "parallel",
+    cutoff: CutoffOpt = 40.0,
+    order: OrderOpt = 4,
+    stiction: StictionOpt = 0.05,
+    steering_stiction: SteeringStictionOpt = 0.1,
+    stiction_guard: GuardOpt = 2.0,
+    as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
     from agvdyn.validation import validate as validate_log
@@ -175,23 +201,27 @@ def report(
     out: Path = typer.Option(..., "--out", "-o", help="HTML report to write."),
     validation: Optional[Path] = typer.Option(None, "--validation", help="Validation log (e.g. the lane change)."),
     params_out: Optional[Path] = typer.Option(None, "--params-out", help="Also write the parameter file here."),
-    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the sidecar's platform, else the prototype."),
-    fix: Optional[list[str]] = typer.Option(None, "--fix", help=_FIX_HELP),
-    mapping: Optional[Path] = typer.Option(None, help="Mapping file for logs not in our schema."),
-    filtering: str = typer.Option("parallel", help="parallel or literal."),
-    cutoff: float = typer.Option(40.0, help="Cut-off of the zero-phase low-pass, rad/s."),
-    order: int = typer.Option(4, help="Order of the Butterworth prototype."),
-    stiction: float = typer.Option(0.05, help="Stiction threshold of x_ch, y_ch, gamma_ch (m/s, rad/s)."),
-    steering_stiction: float = typer.Option(0.1, help="Stiction threshold of the steering coordinates (rad/s)."),
-    stiction_guard: float = typer.Option(2.0, help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off)."),
-    offsets: bool = typer.Option(True, "--offsets/--no-offsets", help="Estimate constant motor-torque offsets."),
+    platform: PlatformOpt = None,
+    fix: FixOpt = None,
+    mapping: MappingOpt = None,
+    filtering: FilteringOpt = "parallel",
+    cutoff: CutoffOpt = 40.0,
+    order: OrderOpt = 4,
+    stiction: StictionOpt = 0.05,
+    steering_stiction: SteeringStictionOpt = 0.1,
+    stiction_guard: GuardOpt = 2.0,
+    offsets: OffsetsOpt = True,
+    segments: SegmentsOpt = None,
+    max_inflation: MaxInflationOpt = 100.0,
+    max_relative_std: MaxRelativeStdOpt = 0.5,
 ) -> None:
     """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
     from agvdyn.report import reference_parameters, write_report
     from agvdyn.validation import validate as validate_log
 
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, offsets, stiction_guard)
+    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
+                         max_inflation, max_relative_std)
     loaded, geometry = _load(ident_logs, mapping, platform)
     try:
         ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
