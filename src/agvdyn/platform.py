@@ -90,6 +90,15 @@ class Geometry:
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "l": self.l, "b": self.b, "a": self.a, "r": self.r, "i_G": self.i_G}
 
+    def same_shape(self, other: "Geometry", rtol: float = 1e-9) -> bool:
+        """True when l, b, a, r, i_G agree (names may differ)."""
+        return all(math.isclose(getattr(self, k), getattr(other, k), rel_tol=rtol, abs_tol=1e-12)
+                   for k in ("l", "b", "a", "r", "i_G"))
+
+    def describe(self) -> str:
+        """One line for messages: name and the five numbers."""
+        return f"{self.name}: l={self.l:g} m, b={self.b:g} m, a={self.a:g} m, r={self.r:g} m, i_G={self.i_G:g}"
+
 
 #: Default geometry of the prototype, assumed in PLATFORM.md (the paper does not publish it).
 PROTOTYPE = Geometry(l=1.2, b=0.8, a=0.05, r=0.1, i_G=25.0, name="prototype")
@@ -162,6 +171,8 @@ class ParameterFile:
     fixed: tuple[str, ...] = ()
     condition_number: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The vehicle the parameters belong to (key ``platform``), None when the file names none.
+    geometry: Geometry | None = None
 
     def __post_init__(self) -> None:
         for name in (*self.std, *self.fixed):
@@ -178,7 +189,9 @@ class ParameterFile:
             out["parameters"][name] = entry
         out["condition_number"] = None if self.condition_number is None else float(self.condition_number)
         out["fixed"] = list(self.fixed)
-        out.update(self.extra)
+        if self.geometry is not None:
+            out["platform"] = self.geometry.to_dict()
+        out.update({k: v for k, v in self.extra.items() if k != "platform" or self.geometry is None})
         return out
 
 
@@ -247,12 +260,46 @@ def read_parameters(path: str | os.PathLike) -> ParameterFile:
         else:
             values[name] = _number(path, name, entry)
     fixed = data.get("fixed") or [n for n in PARAMETER_NAMES if isinstance(table[n], dict) and table[n].get("fixed")]
+    if not isinstance(fixed, list) or any(n not in PARAMETER_NAMES for n in fixed):
+        raise PlatformFileError(f"{path}: fixed={fixed!r}: expected a list of parameter names from {list(PARAMETER_NAMES)}")
     cond = data.get("condition_number")
+    geometry = None if data.get("platform") is None else _geometry_entry(path, data["platform"])
     try:
         params = Parameters(**values)
-        return ParameterFile(params, std, tuple(fixed), None if cond is None else _number(path, "condition_number", cond))
+        return ParameterFile(params, std, tuple(fixed), None if cond is None else _number(path, "condition_number", cond),
+                             geometry=geometry)
     except ValueError as exc:
         raise PlatformFileError(f"{path}: {exc}") from exc
+
+
+def _geometry_entry(path: Path, entry: Any) -> Geometry:
+    """The ``platform`` entry of a parameter file as a Geometry."""
+    keys = ("l", "b", "a", "r", "i_G")
+    if not isinstance(entry, dict) or any(k not in entry for k in keys):
+        raise PlatformFileError(f"{path}: platform: expected a mapping with {list(keys)}, found {entry!r}")
+    values = {k: _number(path, f"platform.{k}", entry[k]) for k in keys}
+    try:
+        return Geometry(**values, name=str(entry.get("name", "platform")))
+    except ValueError as exc:
+        raise PlatformFileError(f"{path}: platform: {exc}") from exc
+
+
+def platform_of_parameters(content: ParameterFile, override: Geometry | None = None) -> tuple[Geometry, str | None]:
+    """The vehicle to use with a parameter file, and a warning or None.
+
+    ``override`` (a ``--platform``) wins, with a warning when its geometry differs from the one
+    stored in the file; else the file's platform; else the prototype (with a warning: the file
+    does not say which vehicle its parameters belong to).
+    """
+    stored = content.geometry
+    if override is not None:
+        if stored is not None and not stored.same_shape(override):
+            return override, (f"the platform given ({override.describe()}) differs from the one stored in the "
+                              f"parameter file ({stored.describe()}); using the one given")
+        return override, None
+    if stored is not None:
+        return stored, None
+    return PROTOTYPE, "the parameter file names no platform: using the built-in prototype"
 
 
 def write_parameters(path: str | os.PathLike, content: ParameterFile | Parameters) -> Path:
