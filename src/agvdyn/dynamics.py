@@ -58,6 +58,63 @@ def regressor(q_dot, q_ddot, epsilon: float = EPSILON) -> np.ndarray:
     return T
 
 
+#: The distinct nonzero entries of Theta (eq. 16), the columns of :func:`regressor_signals`.
+REGRESSOR_SIGNALS = (
+    "a_x", "a_y", "gamma_ddot",
+    "alpha_l_ddot", "alpha_l_dot", "tanh_alpha_l", "alpha_r_ddot", "alpha_r_dot", "tanh_alpha_r",
+    *(f"beta_{w}_ddot" for w in ("fl", "rl", "fr", "rr")),
+    *(f"beta_{w}_dot" for w in ("fl", "rl", "fr", "rr")),
+    *(f"tanh_beta_{w}" for w in ("fl", "rl", "fr", "rr")),
+)
+
+
+def regressor_signals(q_dot, q_ddot, epsilon: float = EPSILON) -> np.ndarray:
+    """The 21 distinct nonzero entries of Theta (eq. 16) ``(N, 21)``, in :data:`REGRESSOR_SIGNALS` order.
+
+    ``a_x = x_ddot - y_dot gamma_dot``, ``a_y = y_ddot + x_dot gamma_dot``, ``gamma_ddot``, then per
+    steering side acceleration, rate and ``tanh(rate / epsilon)``, then the wheels' accelerations,
+    rates and tanh terms. Theta is linear in these, so a linear filter applied to them is the
+    filter applied to Theta (parallel filtering); :func:`project_signals` builds ``H_k^T Theta``.
+    """
+    qd, qdd = _motion(q_dot, q_ddot)
+    out = np.empty((qd.shape[0], len(REGRESSOR_SIGNALS)))
+    out[:, 0] = qdd[:, 0] - qd[:, 1] * qd[:, 2]
+    out[:, 1] = qdd[:, 1] + qd[:, 0] * qd[:, 2]
+    out[:, 2] = qdd[:, 2]
+    for k, row in enumerate((3, 4)):
+        out[:, 3 + 3 * k] = qdd[:, row]
+        out[:, 4 + 3 * k] = qd[:, row]
+        out[:, 5 + 3 * k] = np.tanh(qd[:, row] / epsilon)
+    out[:, 9:13] = qdd[:, 5:]
+    out[:, 13:17] = qd[:, 5:]
+    out[:, 17:21] = np.tanh(qd[:, 5:] / epsilon)
+    return out
+
+
+def project_signals(H: np.ndarray, signals: np.ndarray) -> np.ndarray:
+    """``H_k^T Theta`` ``(N, n_k, 11)`` of eq. (19) from the signals of :func:`regressor_signals`.
+
+    ``H`` is ``(N, 9, n_k)`` or ``(1, 9, n_k)`` (a constant model). Equal to
+    :func:`projected_regressor` for the same motion; used where Theta's entries were filtered.
+    """
+    S = signals[:, :, None]
+    W = H[:, 5:, :]
+    out = np.empty((signals.shape[0], H.shape[2], N_P))
+    rot = H[:, 2, :] * S[:, 2]
+    out[:, :, _I["m_ch"]] = H[:, 0, :] * S[:, 0] + H[:, 1, :] * S[:, 1]
+    out[:, :, _I["C_ch"]] = rot
+    out[:, :, _I["C_l"]] = rot + H[:, 3, :] * S[:, 3]
+    out[:, :, _I["d_vl"]] = H[:, 3, :] * S[:, 4]
+    out[:, :, _I["d_cl"]] = H[:, 3, :] * S[:, 5]
+    out[:, :, _I["C_r"]] = rot + H[:, 4, :] * S[:, 6]
+    out[:, :, _I["d_vr"]] = H[:, 4, :] * S[:, 7]
+    out[:, :, _I["d_cr"]] = H[:, 4, :] * S[:, 8]
+    out[:, :, _I["B_w"]] = np.einsum("nwk,nw->nk", W, signals[:, 9:13]) if W.shape[0] > 1 else signals[:, 9:13] @ W[0]
+    out[:, :, _I["d_vw"]] = np.einsum("nwk,nw->nk", W, signals[:, 13:17]) if W.shape[0] > 1 else signals[:, 13:17] @ W[0]
+    out[:, :, _I["d_cw"]] = np.einsum("nwk,nw->nk", W, signals[:, 17:21]) if W.shape[0] > 1 else signals[:, 17:21] @ W[0]
+    return out
+
+
 def input_matrix(geom: Geometry) -> np.ndarray:
     """Input matrix B ``(9, 4)`` of eq. (17): wheel torque = i_G M_mot on each wheel coordinate."""
     B = np.zeros((N_Q, 4))

@@ -155,23 +155,24 @@ def constraint_matrix(geom: Geometry, alpha) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot):  # pragma: no cover - compiled
+def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot, slip):  # pragma: no cover - compiled
     n = alpha.shape[0]
     out = np.empty((n, 3))
     A = np.empty((8, 9))
     M = np.empty((3, 3))
     g = np.empty(3)
+    rhs = np.empty(8)
     radii = np.full(4, r)
     for j in range(n):
         constraint_matrix_into(l, b, a, radii, alpha[j, 0], alpha[j, 1], A)
         M[:, :] = 0.0
         g[:] = 0.0
         for row in range(8):
-            rhs = -(A[row, 3] * alpha_dot[j, 0] + A[row, 4] * alpha_dot[j, 1])
+            rhs[row] = -(A[row, 3] * alpha_dot[j, 0] + A[row, 4] * alpha_dot[j, 1])
             for w in range(4):
-                rhs -= A[row, 5 + w] * beta_dot[j, w]
+                rhs[row] -= A[row, 5 + w] * beta_dot[j, w]
             for p in range(3):
-                g[p] += A[row, p] * rhs
+                g[p] += A[row, p] * rhs[row]
                 for q in range(3):
                     M[p, q] += A[row, p] * A[row, q]
         # 3 x 3 symmetric solve by cofactors (A_ch has full column rank for every alpha)
@@ -185,7 +186,20 @@ def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot):  # pragma: no cover - com
         out[j, 0] = (c00 * g[0] + c01 * g[1] + c02 * g[2]) / det
         out[j, 1] = (c01 * g[0] + c11 * g[1] + c12 * g[2]) / det
         out[j, 2] = (c02 * g[0] + c12 * g[1] + c22 * g[2]) / det
+        if slip.shape[0] == n:  # residual of the 8 rolling constraints: slip velocity per contact point
+            for w in range(4):
+                lat = A[w, 0] * out[j, 0] + A[w, 1] * out[j, 1] + A[w, 2] * out[j, 2] - rhs[w]
+                lon = A[4 + w, 0] * out[j, 0] + A[4 + w, 1] * out[j, 1] + A[4 + w, 2] * out[j, 2] - rhs[4 + w]
+                slip[j, w] = np.sqrt(lat * lat + lon * lon)
     return out
+
+
+def _odometry_inputs(alpha, alpha_dot, beta_dot):
+    alpha = np.ascontiguousarray(as_alpha(alpha))
+    n = alpha.shape[0]
+    alpha_dot = np.ascontiguousarray(_rows(alpha_dot, n, 2, "alpha_dot"))
+    beta_dot = np.ascontiguousarray(_rows(beta_dot, n, 4, "beta_dot"))
+    return alpha, alpha_dot, beta_dot
 
 
 def odometry(geom: Geometry, alpha, alpha_dot, beta_dot) -> np.ndarray:
@@ -193,11 +207,22 @@ def odometry(geom: Geometry, alpha, alpha_dot, beta_dot) -> np.ndarray:
 
     ``q_ch_dot = -A_ch^+ (A_alpha alpha_dot + A_beta beta_dot)`` (least squares over all 8 rows).
     """
-    alpha = np.ascontiguousarray(as_alpha(alpha))
-    n = alpha.shape[0]
-    alpha_dot = np.ascontiguousarray(_rows(alpha_dot, n, 2, "alpha_dot"))
-    beta_dot = np.ascontiguousarray(_rows(beta_dot, n, 4, "beta_dot"))
-    return _odometry(geom.l, geom.b, geom.a, geom.r, alpha, alpha_dot, beta_dot)
+    alpha, alpha_dot, beta_dot = _odometry_inputs(alpha, alpha_dot, beta_dot)
+    return _odometry(geom.l, geom.b, geom.a, geom.r, alpha, alpha_dot, beta_dot, np.empty((0, 4)))
+
+
+def odometry_with_slip(geom: Geometry, alpha, alpha_dot, beta_dot) -> tuple[np.ndarray, np.ndarray]:
+    """Chassis velocities of eq. (3) ``(N, 3)`` and the slip speed of each wheel ``(N, 4)`` (m/s).
+
+    The eight rolling constraints over-determine the three chassis velocities; what the least
+    squares of eq. (3) leaves, ``A(alpha) q_dot`` with the odometry's chassis velocities, is the
+    slip velocity of each contact point that the measured rates imply (lateral and longitudinal;
+    its norm per wheel is returned). Zero for a vehicle that rolls without slip.
+    """
+    alpha, alpha_dot, beta_dot = _odometry_inputs(alpha, alpha_dot, beta_dot)
+    slip = np.empty((alpha.shape[0], 4))
+    twist = _odometry(geom.l, geom.b, geom.a, geom.r, alpha, alpha_dot, beta_dot, slip)
+    return twist, slip
 
 
 # --- ICR relation, eq. (6)-(8) ------------------------------------------------------------

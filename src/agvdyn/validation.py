@@ -157,7 +157,8 @@ def validate(log: Any, params: Parameters | ParameterFile | str | os.PathLike,
     geometry = platform_for([log], platform)
     blocks, notes = log_equations(log, geometry, settings)
     if not blocks:
-        raise ValueError(f"{getattr(log, 'path', None) or '<log>'}: no run in a motion mode to validate on")
+        raise ValueError(f"{getattr(log, 'path', None) or '<log>'}: no row in a motion mode to validate on "
+                         "(the chassis moves with steering angles of no mode of eq. 9, or stands still)")
     table = _table(blocks, parameters.to_vector())
     return Validation(parameters, tuple(blocks), table, settings, geometry,
                       str(getattr(log, "path", None) or "<log>"), tuple(notes))

@@ -1,0 +1,47 @@
+"""Identification of the dynamic parameters from logs: stacked regression of eq. (22)-(25).
+
+Row pipeline (paper sec. 6-7), one module per stage, data flowing one way::
+
+    stretches   each continuous recording filtered and differentiated once; odometry (eq. 3),
+                slip speed of the redundant rolling constraints, entries of Theta (eq. 16)
+    rows        mode of every row from its configuration (labels are hints), slip, stiction,
+                edges -> rows H_k^T Theta p = H_k^T B u of eq. (19)   (equations, slip)
+    regression  stacked system (eq. 22), known parameters to the right (eq. 24), rank and
+                quality checks, column-scaled least squares (eq. 25)
+    plausibility  negative masses, inertias, frictions refused with the likely sign mistake
+    result      :class:`Identification`
+
+The entry point is :func:`identify`.
+"""
+from agvdyn.identification.equations import EquationBlock, equation_block, generalized_velocity
+from agvdyn.identification.pipeline import fit_blocks, identify, load_logs, platform_for
+from agvdyn.identification.plausibility import ImplausibleError
+from agvdyn.identification.regression import (
+    Dependency,
+    Estimator,
+    LeastSquares,
+    UnidentifiableError,
+    dependent_parameters,
+    stacked_system,
+    variance_inflation,
+)
+from agvdyn.identification.result import Identification
+from agvdyn.identification.rows import LogRows, RowCounts, log_equations, log_rows, row_modes
+from agvdyn.identification.settings import (
+    CHASSIS_COORDINATES,
+    DEFAULT_FIXED,
+    EXCITATION,
+    OFFSET_NAMES,
+    STEERING_COORDINATES,
+    Filtering,
+    IdentificationSettings,
+)
+from agvdyn.identification.slip import SlipEvent
+
+__all__ = [
+    "DEFAULT_FIXED", "EXCITATION", "OFFSET_NAMES", "STEERING_COORDINATES", "CHASSIS_COORDINATES",
+    "Filtering", "IdentificationSettings", "EquationBlock", "UnidentifiableError", "ImplausibleError",
+    "Dependency", "Estimator", "LeastSquares", "Identification", "SlipEvent", "RowCounts", "LogRows",
+    "equation_block", "generalized_velocity", "log_equations", "log_rows", "row_modes", "stacked_system",
+    "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "load_logs", "platform_for",
+]

@@ -1,0 +1,118 @@
+"""Rows of eq. (19): ``H_k^T Theta p = H_k^T B u`` per sample and generalized coordinate."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from agvdyn.dynamics import project_signals, projected_input, projected_regressor
+from agvdyn.kinematics import MODE_TOLERANCE, Mode, kinematic_model
+from agvdyn.platform import EPSILON, Geometry
+from agvdyn.signals import stiction_mask
+
+__all__ = ["EquationBlock", "equation_block", "projected_block", "generalized_velocity"]
+
+
+@dataclass(frozen=True, eq=False)
+class EquationBlock:
+    """Rows of eq. (19) for consecutive samples in one motion mode.
+
+    Attributes
+    ----------
+    source, segment : where the rows come from (file name; segment label, or ``"mode k"``).
+    mode : motion mode k of the rows.
+    t : (n,) time, s.
+    regressor : (n, n_k, 11) ``H_k^T Theta`` as used in the regression (filtered when set so).
+    torque : (n, n_k) ``H_k^T B u`` as used in the regression.
+    s_dot : (n, n_k) generalized velocities (eq. 10-13).
+    keep : (n, n_k) rows used in the regression (stiction, slip, edges and guards dropped).
+    offset_regressor : (n, n_k, 4) ``H_k^T B e_i``: generalized torques of a unit offset of each
+        motor-torque measurement.
+    """
+
+    source: str
+    segment: str
+    mode: Mode
+    t: np.ndarray
+    regressor: np.ndarray
+    torque: np.ndarray
+    s_dot: np.ndarray
+    keep: np.ndarray
+    offset_regressor: np.ndarray
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        return self.mode.coordinates
+
+    def model_torque(self, p: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
+        """Model generalized torques ``H_k^T Theta p`` (n, n_k), plus ``H_k^T B o`` of motor-torque
+        offsets ``o`` (4,) when given (the model of the *measured* torques)."""
+        out = self.regressor @ np.asarray(p, dtype=float)
+        if offsets is not None:
+            out = out + self.offset_regressor @ np.asarray(offsets, dtype=float)
+        return out
+
+    def rows(self, sl: slice, segment: str) -> "EquationBlock":
+        """The rows ``sl`` of this block under another segment name."""
+        return EquationBlock(self.source, segment, self.mode, self.t[sl], self.regressor[sl], self.torque[sl],
+                             self.s_dot[sl], self.keep[sl], self.offset_regressor[sl])
+
+
+def generalized_velocity(H: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
+    """s_dot = H^+ q_dot (least squares on the kinematic model of eq. 4), (n, n_k)."""
+    if H.strides[0] == 0:  # constant model broadcast over samples
+        return q_dot @ np.linalg.pinv(H[0]).T
+    normal = np.einsum("nik,nij->nkj", H, H)
+    rhs = np.einsum("nik,ni->nk", H, q_dot)
+    return np.linalg.solve(normal, rhs[..., None])[..., 0]
+
+
+def _thresholds(mode: Mode, stiction_threshold: float | Mapping[str, float]) -> float | np.ndarray:
+    if isinstance(stiction_threshold, Mapping):
+        return np.array([stiction_threshold[c] for c in mode.coordinates])
+    return stiction_threshold
+
+
+def _offset_columns(geometry: Geometry, H: np.ndarray, n: int) -> np.ndarray:
+    """``H_k^T B e_i`` (n, n_k, 4) for the four unit motor-torque offsets."""
+    return np.broadcast_to(geometry.i_G * np.swapaxes(H[:, 5:, :], 1, 2), (n, H.shape[2], 4))
+
+
+def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_dot: np.ndarray,
+                   q_ddot: np.ndarray, u: np.ndarray, *, t: np.ndarray | None = None, segment: str = "",
+                   source: str = "", stiction_threshold: float | Mapping[str, float] = 0.0, epsilon: float = EPSILON,
+                   mode_tolerance: float = MODE_TOLERANCE) -> EquationBlock:
+    """Rows ``H_k^T Theta(q, q_dot, q_ddot)`` and ``H_k^T B u`` of eq. (19) from given joint motion.
+
+    No filtering: the signals are used as given (exact model signals, or already filtered
+    measurements). Rows with ``|s_dot| < stiction_threshold`` are marked not kept; the threshold
+    is one number or one per coordinate name (``mode.coordinates``).
+    """
+    mode = Mode.from_label(mode)
+    alpha = np.asarray(alpha, dtype=float)
+    n = alpha.shape[0]
+    try:
+        H = kinematic_model(geometry, mode, alpha, tolerance=mode_tolerance)
+        Y = projected_regressor(geometry, mode, alpha, q_dot, q_ddot, epsilon=epsilon, tolerance=mode_tolerance)
+        tau = projected_input(geometry, mode, alpha, u, tolerance=mode_tolerance)
+    except ValueError as exc:
+        where = f"{source}: " if source else ""
+        raise ValueError(f"{where}segment {segment!r} (mode {mode.label}): {exc}") from exc
+    s_dot = generalized_velocity(H, np.asarray(q_dot, dtype=float))
+    keep = stiction_mask(s_dot, _thresholds(mode, stiction_threshold))
+    t = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
+    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep, _offset_columns(geometry, H, n))
+
+
+def projected_block(geometry: Geometry, mode: Mode, alpha: np.ndarray, q_dot: np.ndarray, signals: np.ndarray,
+                    u: np.ndarray, *, t: np.ndarray, source: str, segment: str,
+                    stiction_threshold: float | Mapping[str, float], mode_tolerance: float) -> EquationBlock:
+    """Rows of eq. (19) from the (filtered) entries of Theta and torques of consecutive samples in mode k."""
+    H = kinematic_model(geometry, mode, alpha, tolerance=mode_tolerance)
+    n = alpha.shape[0]
+    Y = project_signals(H, signals)
+    tau = geometry.i_G * np.einsum("nik,ni->nk", H[:, 5:, :], u)
+    s_dot = generalized_velocity(H, q_dot)
+    keep = stiction_mask(s_dot, _thresholds(mode, stiction_threshold))
+    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep, _offset_columns(geometry, H, n))

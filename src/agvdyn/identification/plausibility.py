@@ -1,0 +1,128 @@
+"""Physical plausibility of identified parameters, and the likely cause when they are not.
+
+Masses and inertias must be positive and friction coefficients non-negative. An estimate that
+breaks this is refused; the refusal tries the sign mistakes a logger or a mapping file makes
+(one side's wheel torques or wheel angles with the wrong sign, all torques, a steering angle)
+and names the one under which the same data give plausible parameters and a smaller residual.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+
+
+from agvdyn.platform import PARAMETER_UNITS
+
+__all__ = ["POSITIVE", "NON_NEGATIVE", "SIGN_HYPOTHESES", "Implausible", "ImplausibleError", "implausible_parameters",
+           "diagnose_signs"]
+
+#: Parameters that must be > 0 (masses and inertias) and >= 0 (friction), eq. (18).
+POSITIVE = ("C_l", "C_r", "m_ch", "C_ch", "B_w")
+NON_NEGATIVE = ("d_vl", "d_cl", "d_vr", "d_cr", "d_vw", "d_cw")
+
+#: Sign mistakes tried when an estimate is implausible: (what, log columns negated).
+SIGN_HYPOTHESES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("the right-hand motor torques m_fr, m_rr have the wrong sign", ("m_fr", "m_rr")),
+    ("the left-hand motor torques m_fl, m_rl have the wrong sign", ("m_fl", "m_rl")),
+    ("all motor torques have the wrong sign", ("m_fl", "m_rl", "m_fr", "m_rr")),
+    ("the right-hand wheel angles beta_fr, beta_rr have the wrong sign", ("beta_fr", "beta_rr")),
+    ("the left-hand wheel angles beta_fl, beta_rl have the wrong sign", ("beta_fl", "beta_rl")),
+    ("all wheel angles have the wrong sign", ("beta_fl", "beta_rl", "beta_fr", "beta_rr")),
+    ("the steering angles alpha_l, alpha_r have the wrong sign", ("alpha_l", "alpha_r")),
+)
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """A parameter estimate that is physically impossible."""
+
+    name: str
+    value: float
+    std: float
+
+    def describe(self) -> str:
+        what = "mass or inertia" if self.name in POSITIVE else "friction coefficient"
+        need = "> 0" if self.name in POSITIVE else ">= 0"
+        std = f" +- {self.std:.3g}" if math.isfinite(self.std) else ""
+        return f"{self.name} = {self.value:.4g}{std} {PARAMETER_UNITS[self.name]} (a {what}, expected {need})"
+
+
+class ImplausibleError(ValueError):
+    """Physically impossible estimates; ``implausible`` lists them, ``cause`` the likely cause or None."""
+
+    def __init__(self, implausible: Sequence[Implausible], cause: str | None, detail: str) -> None:
+        self.implausible = tuple(implausible)
+        self.cause = cause
+        lines = "\n  ".join(i.describe() for i in self.implausible)
+        super().__init__(f"physically impossible estimates:\n  {lines}\n{detail}")
+
+
+def implausible_parameters(values: dict[str, float], std: dict[str, float], *, significance: float = 3.0
+                           ) -> tuple[list[Implausible], list[str]]:
+    """(refused, warnings): masses/inertias <= 0 are refused; a negative friction is refused when it is
+    below zero by more than ``significance`` std, else a warning (consistent with zero)."""
+    refused, warnings = [], []
+    for name, value in values.items():
+        sd = std.get(name, math.nan)
+        if name in POSITIVE and value <= 0:
+            refused.append(Implausible(name, value, sd))
+        elif name in NON_NEGATIVE and value < 0:
+            if math.isfinite(sd) and -value <= significance * sd:
+                warnings.append(f"{name} = {value:.4g} {PARAMETER_UNITS[name]} is negative but within "
+                                f"{significance:g} std ({sd:.3g}) of zero: the data hardly see this friction")
+            else:
+                refused.append(Implausible(name, value, sd))
+    return refused, warnings
+
+
+def _flipped(log: Any, columns: tuple[str, ...]) -> Any:
+    frame = log.frame.copy()
+    frame[list(columns)] = -frame[list(columns)]
+    return dataclasses.replace(log, frame=frame)
+
+
+def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residual: float
+                   ) -> tuple[str | None, str]:
+    """Try each sign hypothesis on the logs; ``fit(logs) -> Identification`` (plausibility off).
+
+    Returns (cause, message): the hypothesis under which the estimate is plausible with the
+    smallest residual below ``residual`` (RMS over all generalized torques), or None.
+    """
+    best: tuple[float, str, Any] | None = None
+    for what, columns in SIGN_HYPOTHESES:
+        try:
+            ident = fit([_flipped(log, columns) for log in logs])
+        except ValueError:
+            continue
+        values = {n: getattr(ident.parameters, n) for n in (*POSITIVE, *NON_NEGATIVE) if n not in ident.fixed}
+        refused, _ = implausible_parameters(values, ident.std)
+        rms = overall_rms(ident)
+        if not refused and rms < residual and (best is None or rms < best[0]):
+            best = (rms, what, ident)
+    if best is None:
+        return None, ("no single sign mistake explains it (tried: " + "; ".join(w for w, _ in SIGN_HYPOTHESES) +
+                      "). Check the units and the side of the gear of torques and wheel angles (motor side, "
+                      "i_G), the wheel order fl, rl, fr, rr, and whether the data excite the parameters.")
+    rms, what, ident = best
+    p = ident.parameters
+    return what, (f"likely cause: {what}. With them negated the same data give m_ch = {p.m_ch:.5g} kg, "
+                  f"C_ch = {p.C_ch:.5g} kg m^2, d_vw = {p.d_vw:.4g} N m s/rad and a residual RMS of {rms:.4g} "
+                  f"N m instead of {residual:.4g} N m. Fix the sign in the logger, or give 'sign: -1' for these "
+                  "signals in the mapping file (docs/io.md).")
+
+
+def overall_rms(ident: Any) -> float:
+    """RMS of the residual over all kept equation rows of an identification."""
+    p = ident.parameters.to_vector()
+    total, count = 0.0, 0
+    for b in ident.blocks:
+        r = (b.torque - b.model_torque(p, ident.offset_vector))[b.keep]
+        total += float(r @ r)
+        count += r.size
+    return math.sqrt(total / count) if count else math.nan
+
+

@@ -1,0 +1,140 @@
+"""The result of an identification: parameters, uncertainty, the rows behind them and their account."""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from agvdyn.identification.equations import EquationBlock
+from agvdyn.identification.rows import RowCounts
+from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
+from agvdyn.identification.slip import SlipEvent
+from agvdyn.platform import PARAMETER_NAMES, PARAMETER_UNITS, Geometry, ParameterFile, Parameters, write_parameters
+
+__all__ = ["Identification"]
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Result of :func:`identify`: parameters with uncertainty and the data behind them.
+
+    Attributes
+    ----------
+    parameters : all 11 parameters (fixed ones at their given values).
+    std : standard deviation of each estimated parameter.
+    fixed : names of the parameters taken as known (eq. 24).
+    condition_number : ``cond(Theta_1,w^T Theta_1,w)`` of the column-scaled stacked regressor
+        (the paper's 11.56); ``condition_number_unscaled`` of ``Theta_1^T Theta_1``.
+    residual_rms : RMS of ``tau - Theta p`` over the kept rows, per ``"segment:coordinate"``.
+    blocks : the equation blocks (Fig. 5 data), ``notes``: stretches cut or skipped and why.
+    rows : account of the samples (used, dropped at edges, slip, in no mode, label mismatches,
+        clipped at the stops); ``slip_events``: wheel slip found (:class:`SlipEvent`);
+        ``slip_thresholds``: threshold used per log (m/s).
+    offsets, offsets_std : estimated motor-torque offsets (motor side, N m) when
+        ``settings.torque_offsets``; the model torques of Fig. 5 include them.
+        ``condition_number_with_offsets``: cond of the scaled regressor with the offset columns.
+    """
+
+    parameters: Parameters
+    std: dict[str, float]
+    fixed: tuple[str, ...]
+    condition_number: float
+    condition_number_unscaled: float
+    residual_rms: dict[str, float]
+    n_rows: int
+    n_samples: int
+    blocks: tuple[EquationBlock, ...]
+    settings: IdentificationSettings
+    geometry: Geometry
+    sources: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    estimator: str = "LeastSquares"
+    offsets: dict[str, float] = field(default_factory=dict)
+    offsets_std: dict[str, float] = field(default_factory=dict)
+    condition_number_with_offsets: float = float("nan")
+    rows: RowCounts = field(default_factory=RowCounts)
+    slip_events: tuple[SlipEvent, ...] = ()
+    slip_thresholds: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def offset_vector(self) -> np.ndarray | None:
+        """Motor-torque offsets (4,) in wheel order, None when they were not estimated."""
+        return np.array([self.offsets[n] for n in OFFSET_NAMES]) if self.offsets else None
+
+    def to_frame(self) -> pd.DataFrame:
+        """Parameter table: value, std, relative std, unit, fixed; index = parameter name."""
+        rows = []
+        for name in PARAMETER_NAMES:
+            value = getattr(self.parameters, name)
+            std = self.std.get(name, float("nan"))
+            rows.append({"name": name, "value": value, "std": std,
+                         "rel_std": std / abs(value) if value != 0 else float("nan"),
+                         "unit": PARAMETER_UNITS[name], "fixed": name in self.fixed})
+        return pd.DataFrame(rows).set_index("name")
+
+    def torques_frame(self) -> pd.DataFrame:
+        """Measured and model generalized torques per row (long format, Fig. 5)."""
+        p = self.parameters.to_vector()
+        frames = []
+        for b in self.blocks:
+            model = b.model_torque(p, self.offset_vector)
+            for j, coord in enumerate(b.coordinates):
+                frames.append(pd.DataFrame({
+                    "source": b.source, "segment": b.segment, "mode": b.mode.label, "coordinate": coord,
+                    "t": b.t, "measured": b.torque[:, j], "model": model[:, j], "kept": b.keep[:, j]}))
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def to_parameter_file(self) -> ParameterFile:
+        extra = {
+            "condition_number_unscaled": self.condition_number_unscaled,
+            "residual_rms": dict(self.residual_rms),
+            "n_rows": self.n_rows,
+            "n_samples": self.n_samples,
+            "estimator": self.estimator,
+            "settings": self.settings.to_dict(),
+            "sources": list(self.sources),
+            "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
+        }
+        extra.update(self._data_account())
+        return ParameterFile(self.parameters, dict(self.std), self.fixed, self.condition_number, extra,
+                             geometry=self.geometry)
+
+    def _data_account(self) -> dict[str, Any]:
+        return {
+            "rows": self.rows.to_dict(),
+            "slip_events": [e.to_dict() for e in self.slip_events],
+            "dropped_slip_rows": self.rows.slip,
+            "slip_threshold_mps": dict(self.slip_thresholds),
+        }
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the parameter file (YAML, or JSON by suffix) atomically."""
+        return write_parameters(path, self.to_parameter_file())
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The summary printed by ``agvdyn identify --json``."""
+        return {
+            "parameters": {n: {"value": getattr(self.parameters, n), "std": self.std.get(n)} for n in PARAMETER_NAMES},
+            "condition_number": self.condition_number,
+            "condition_number_unscaled": self.condition_number_unscaled,
+            "condition_number_with_offsets": (None if not math.isfinite(self.condition_number_with_offsets)
+                                              else self.condition_number_with_offsets),
+            "fixed": list(self.fixed),
+            "residual_rms": dict(self.residual_rms),
+            "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
+            "n_rows": self.n_rows,
+            "n_samples": self.n_samples,
+            "filtering": self.settings.filtering.value,
+            "sources": list(self.sources),
+            "notes": list(self.notes),
+            "warnings": list(self.warnings),
+            "platform": self.geometry.to_dict(),
+            **self._data_account(),
+        }
+

@@ -1,0 +1,199 @@
+"""Stage 2 of the row pipeline: which rows of a filtered stretch are used, and as what.
+
+Every row's motion mode comes from its configuration (eq. 9, PLATFORM.md) and its velocities:
+
+* chassis at rest (wheel surface speed not explained by steering below ``rest_speed``) with the
+  steering moving: wheel alignment at rest, mode 1, whatever the angles;
+* chassis at rest otherwise: the mode of the configuration (its chassis rows are stiction rows);
+* chassis moving: the mode of the configuration; the straight configuration with the steering
+  moving is car-like motion (mode 2); moving in no mode's configuration (mode 1's angles), or
+  steering while moving laterally or rotating, is no mode of the model: left out and counted.
+
+A segment label is a hint: it names the rows' experiment (block names, ``--segments``), and a
+label that disagrees with the row's mode is counted, never a refusal. Rows inside the filter's
+transient at a stretch's ends, wheel-slip rows and their guard, and rows of unselected segments
+are dropped; stiction rows (sec. 7) and a guard around them and around mode changes too.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agvdyn.identification.equations import EquationBlock, projected_block
+from agvdyn.identification.settings import IdentificationSettings
+from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
+from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, stretch_bounds
+from agvdyn.kinematics import Mode, detect_mode, kinematic_model
+from agvdyn.platform import Geometry
+from agvdyn.signals import guarded_mask, runs
+
+__all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations"]
+
+#: Motion mode of the rows each segment label names (PLATFORM.md); only for counting disagreements.
+LABEL_MODES: dict[str, tuple[Mode, ...]] = {
+    "steer_left": (Mode.PARKING,), "steer_right": (Mode.PARKING,), "align": (Mode.PARKING,),
+    "straight": (Mode.STRAIGHT,), "rotation": (Mode.ROTATION,), "lateral": (Mode.LATERAL,),
+    "lane_change": (Mode.CAR_LIKE, Mode.STRAIGHT),
+}
+NO_MODE = 0
+
+
+@dataclass
+class RowCounts:
+    """What happened to the samples of the logs (counts of samples, not of equation rows)."""
+
+    samples: int = 0
+    stretches: int = 0
+    edge: int = 0
+    too_short: int = 0
+    no_mode: int = 0
+    not_selected: int = 0
+    slip: int = 0
+    used: int = 0
+    per_mode: dict[str, int] = field(default_factory=dict)
+    label_mismatch: dict[str, int] = field(default_factory=dict)
+    clipped_stop: dict[str, int] = field(default_factory=dict)
+
+    def add(self, other: "RowCounts") -> None:
+        for key in ("samples", "stretches", "edge", "too_short", "no_mode", "not_selected", "slip", "used"):
+            setattr(self, key, getattr(self, key) + getattr(other, key))
+        for key in ("per_mode", "label_mismatch", "clipped_stop"):
+            mine = getattr(self, key)
+            for k, v in getattr(other, key).items():
+                mine[k] = mine.get(k, 0) + v
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"samples": self.samples, "stretches": self.stretches, "dropped_edge": self.edge,
+                "dropped_too_short": self.too_short, "dropped_no_mode": self.no_mode,
+                "dropped_not_selected": self.not_selected, "dropped_slip": self.slip, "used": self.used,
+                "per_mode": dict(self.per_mode), "label_mismatch": dict(self.label_mismatch),
+                "clipped_stop": dict(self.clipped_stop)}
+
+
+@dataclass(frozen=True, eq=False)
+class LogRows:
+    """The equation blocks of one log and the account of its rows."""
+
+    source: str
+    blocks: tuple[EquationBlock, ...]
+    counts: RowCounts
+    slip_events: tuple[SlipEvent, ...]
+    slip_threshold: float
+    notes: tuple[str, ...]
+    modes: np.ndarray  # (N,) mode per sample (0: no mode, or not filtered)
+
+
+def row_modes(geometry: Geometry, st: Stretch, settings: IdentificationSettings) -> np.ndarray:
+    """Motion mode of each row of a filtered stretch (Mode values; 0 = in no mode of the model)."""
+    config = detect_mode(geometry, st.alpha, settings.mode_tolerance).astype(np.int8)
+    H1 = kinematic_model(geometry, Mode.PARKING, st.alpha[:1])[0]
+    rolling = st.beta_dot - st.alpha_dot @ H1[5:].T  # wheel rates not explained by steering at rest
+    rest = np.max(np.abs(rolling), axis=1) * geometry.r < settings.rest_speed
+    steering = np.max(np.abs(st.alpha_dot), axis=1) > settings.steering_rest_rate
+    mode = config.copy()
+    mode[rest & steering] = Mode.PARKING
+    moving = ~rest
+    mode[moving & (config == Mode.PARKING)] = NO_MODE
+    mode[moving & steering & (config == Mode.STRAIGHT)] = Mode.CAR_LIKE
+    mode[moving & steering & np.isin(config, (Mode.LATERAL, Mode.ROTATION))] = NO_MODE
+    return mode
+
+
+def _labels(log: Any) -> np.ndarray | None:
+    seg = getattr(log, "segments", None)
+    return None if seg is None else np.asarray(seg, dtype=object)
+
+
+def _count_mismatch(counts: RowCounts, labels: np.ndarray, mode: np.ndarray) -> None:
+    for name, expected in LABEL_MODES.items():
+        rows = labels == name
+        if rows.any():
+            off = int(np.count_nonzero(rows & ~np.isin(mode, [int(m) for m in expected])))
+            if off:
+                counts.label_mismatch[name] = counts.label_mismatch.get(name, 0) + off
+
+
+def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: np.ndarray | None,
+                    settings: IdentificationSettings) -> list[EquationBlock]:
+    """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
+    then split where the label changes (block names only: no filter starts there)."""
+    guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
+    thresholds = settings.thresholds()
+    q_dot = st.q_dot
+    blocks = []
+    for a, b in runs(mode):
+        if mode[a] == NO_MODE or not usable[a:b].any():
+            continue
+        m = Mode(int(mode[a]))
+        block = projected_block(geometry, m, st.alpha[a:b], q_dot[a:b], st.signals[a:b], st.torque[a:b],
+                                t=st.t[a:b], source=st.source, segment=f"mode {m.label}",
+                                stiction_threshold=thresholds, mode_tolerance=settings.mode_tolerance)
+        keep = guarded_mask(block.keep & usable[a:b, None], guard)
+        block = EquationBlock(block.source, block.segment, m, block.t, block.regressor, block.torque, block.s_dot,
+                              keep, block.offset_regressor)
+        names = labels[a:b] if labels is not None else np.full(b - a, "", dtype=object)
+        for c, d in runs(names):
+            blocks.append(block.rows(slice(c, d), str(names[c]) or f"mode {m.label}"))
+    return blocks
+
+
+def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()) -> LogRows:
+    """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped."""
+    source = log_source(log)
+    t, alpha, beta = log.t, log.alpha, log.beta
+    labels = _labels(log)
+    counts = RowCounts(samples=int(t.size), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
+    bounds, notes = stretch_bounds(t, alpha, beta, settings)
+    notes = [f"{source}: {n}" for n in notes]
+    padlen = settings.filter.padlen(float(np.median(np.diff(t))))
+    min_rows = max(padlen, 2 * int(math.ceil(settings.seconds(settings.edge_guard) * float(np.median(np.diff(t))) ** -1))) + 1
+    stretches, modes = [], np.zeros(t.size, dtype=np.int8)
+    for a, b in bounds:
+        if b - a <= min_rows:
+            counts.too_short += b - a
+            notes.append(f"{source}: rows {a}..{b - 1} ({b - a} samples) skipped: a continuous stretch needs more "
+                         f"than {min_rows} samples for the zero-phase filter and its edges")
+            continue
+        st = filtered_stretch(geometry, log, a, b, settings)
+        stretches.append(st)
+        modes[a:b] = row_modes(geometry, st, settings)
+    counts.stretches = len(stretches)
+    in_mode = [(st, modes[st.rows]) for st in stretches]
+    speeds = np.concatenate([st.slip[(m != NO_MODE) & ~st.edge].max(axis=1) for st, m in in_mode] or [np.zeros(0)])
+    threshold = slip_threshold(speeds, settings)
+    slip_guard = settings.slip_guard
+    blocks, events = [], []
+    for st, mode in in_mode:
+        lab = None if labels is None else labels[st.rows]
+        drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
+        events += ev
+        selected = np.ones(st.n, dtype=bool) if settings.segments is None or lab is None else np.isin(lab, settings.segments)
+        if settings.segments is not None and lab is None:
+            selected[:] = False
+        in_a_mode = mode != NO_MODE
+        counts.edge += int(np.count_nonzero(st.edge))
+        rest = ~st.edge
+        counts.no_mode += int(np.count_nonzero(rest & ~in_a_mode))
+        rest &= in_a_mode
+        counts.not_selected += int(np.count_nonzero(rest & ~selected))
+        rest &= selected
+        counts.slip += int(np.count_nonzero(rest & drop_slip))
+        usable = rest & ~drop_slip
+        counts.used += int(np.count_nonzero(usable))
+        for m in np.unique(mode[usable]):
+            label = Mode(int(m)).label
+            counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & (mode == m)))
+        if lab is not None:
+            _count_mismatch(counts, lab, mode)
+        blocks += _stretch_blocks(geometry, st, mode, usable, lab, settings)
+    return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
+
+
+def log_equations(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()
+                  ) -> tuple[list[EquationBlock], list[str]]:
+    """Equation blocks of every usable row of a log and notes (see :func:`log_rows`)."""
+    rows = log_rows(log, geometry, settings)
+    return list(rows.blocks), list(rows.notes)

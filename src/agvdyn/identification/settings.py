@@ -1,0 +1,187 @@
+"""Settings of the identification and the names the stages share (paper sec. 6-7)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum
+from types import MappingProxyType
+from typing import Any
+
+from agvdyn.kinematics import MODE_TOLERANCE
+from agvdyn.platform import EPSILON
+from agvdyn.signals import FilterSettings
+
+__all__ = [
+    "DEFAULT_FIXED", "OFFSET_NAMES", "EXCITATION", "STEERING_COORDINATES", "CHASSIS_COORDINATES",
+    "Filtering", "IdentificationSettings",
+]
+
+#: Parameters taken as known by default (eq. 24): B_w from a single-axis test (sec. 7).
+DEFAULT_FIXED: Mapping[str, float] = MappingProxyType({"B_w": 0.121})
+
+#: Names of the motor-torque offsets (nuisance parameters, motor side, N m).
+OFFSET_NAMES = ("offset_fl", "offset_rl", "offset_fr", "offset_rr")
+
+#: Which experiment excites each parameter (Table 1, PLATFORM.md segment names).
+EXCITATION: Mapping[str, str] = MappingProxyType({
+    "C_l": "steer_left (mode 1: steering the left wheel set at rest)",
+    "d_vl": "steer_left (mode 1: steering the left wheel set at rest)",
+    "d_cl": "steer_left (mode 1: steering the left wheel set at rest)",
+    "C_r": "steer_right (mode 1: steering the right wheel set at rest)",
+    "d_vr": "steer_right (mode 1: steering the right wheel set at rest)",
+    "d_cr": "steer_right (mode 1: steering the right wheel set at rest)",
+    "m_ch": "straight (mode 2 with alpha_v = 0) or lateral (mode 3)",
+    "C_ch": "rotation (mode 4)",
+    "d_vw": "straight, lateral or rotation",
+    "d_cw": "straight, lateral or rotation",
+    "B_w": "a car-like steered motion (mode 2, e.g. lane_change), or fix it from a single-axis test (--fix B_w=...)",
+    **dict.fromkeys(OFFSET_NAMES, "the four identification segments together (steer_left, steer_right, straight and "
+                                  "rotation each see another combination of the motor offsets), or no offset "
+                                  "estimation (--no-offsets)"),
+})
+
+#: Generalized coordinates of the steering (eq. 10, 11) and of the chassis (eq. 11-13).
+STEERING_COORDINATES = ("alpha_l", "alpha_r", "alpha_v")
+CHASSIS_COORDINATES = ("x_ch", "y_ch", "gamma_ch")
+
+
+class Filtering(str, Enum):
+    """How measurement noise is filtered out of eq. (19).
+
+    PARALLEL (default): the same zero-phase low-pass on every entry of Theta (tanh Coulomb
+    terms included) and on the torques, so both sides of the equation see the same filter.
+    LITERAL: the paper's wording: filtered angles and derivatives, filtered torques, tanh of
+    the filtered velocity, no filtering of the regressor entries themselves.
+    """
+
+    PARALLEL = "parallel"
+    LITERAL = "literal"
+
+
+_NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "mode_tolerance", "epsilon",
+                 "rank_tolerance", "sample_jitter", "rest_speed", "steering_rest_rate", "edge_guard",
+                 "slip_spread", "slip_floor", "slip_guard", "stretch_gap", "steering_jump_rate",
+                 "wheel_jump_rate")
+
+
+@dataclass(frozen=True)
+class IdentificationSettings:
+    """Settings of :func:`agvdyn.identification.identify` (all tuning constants in one frozen place).
+
+    Signals (one filter per continuous recording)
+    ----------------------------------------------
+    filter : zero-phase low-pass (cut-off 40 rad/s by default, sec. 7).
+    filtering : PARALLEL (default) or LITERAL, see :class:`Filtering`.
+    stretch_gap : a time step longer than this many nominal steps splits a log into two
+        continuous stretches (a dropout), each filtered on its own.
+    steering_jump_rate, wheel_jump_rate : an angle step faster than this (rad/s) between two
+        samples is a discontinuity (two recordings joined, an encoder reset): split there too.
+    edge_guard : rows within ``edge_guard / filter.cutoff`` s of a stretch's ends are dropped
+        (the start and end transients of the zero-phase filter; 5 / 40 rad/s = 125 ms).
+    sample_jitter : largest relative deviation of a time step from the median inside a stretch.
+
+    Rows (modes from the configuration; labels are hints)
+    -----------------------------------------------------
+    mode_tolerance : tolerance (rad) of the mode relations of eq. (9).
+    rest_speed : a row whose wheel surface speed not explained by steering is below this (m/s)
+        has the chassis at rest.
+    steering_rest_rate : a steering rate above this (rad/s) with the chassis at rest is wheel
+        alignment (mode 1), whatever the angles.
+    segments : segment labels whose rows are used; None: every row in a motion mode.
+    slip_threshold : slip speed (m/s) above which a row is wheel slip; None: from the robust
+        spread of the log's slip speed, ``median + slip_spread * 1.4826 MAD``, at least
+        ``slip_floor``. ``inf`` switches slip detection off.
+    slip_guard : rows within this time (s) of a slip row are dropped too.
+
+    Equation rows and regression
+    ----------------------------
+    stiction_threshold : rows of x_ch, y_ch, gamma_ch with ``|s_dot|`` below this are dropped (sec. 7).
+    steering_threshold : the same for alpha_l, alpha_r, alpha_v (rad/s); larger: the steering
+        torque is dominated by Coulomb friction and stick/slip around reversals.
+    stiction_guard : rows within ``stiction_guard / filter.cutoff`` s of a stiction row or a mode
+        change are dropped too (the filter spreads each sample over about that time).
+    torque_offsets : estimate a constant offset of each motor-torque measurement (nuisance
+        parameters shared by all logs of one identification).
+    epsilon : width of the tanh Coulomb model, rad/s.
+    rank_tolerance : relative size below which a column counts as a combination of others.
+    max_inflation, max_relative_std : quality limits (variance inflation of the unit-norm
+        columns; std as a fraction of the value); ``inf`` switches a check off.
+    plausibility : refuse negative masses, inertias and frictions, naming the likely cause.
+    """
+
+    filter: FilterSettings = FilterSettings()
+    filtering: Filtering = Filtering.PARALLEL
+    stretch_gap: float = 3.0
+    steering_jump_rate: float = 20.0
+    wheel_jump_rate: float = 1000.0
+    edge_guard: float = 5.0
+    sample_jitter: float = 0.05
+    mode_tolerance: float = MODE_TOLERANCE
+    rest_speed: float = 0.01
+    steering_rest_rate: float = 0.02
+    segments: tuple[str, ...] | None = None
+    slip_threshold: float | None = None
+    slip_spread: float = 10.0
+    slip_floor: float = 0.02
+    slip_guard: float = 0.1
+    stiction_threshold: float = 0.05
+    steering_threshold: float = 0.1
+    stiction_guard: float = 2.0
+    torque_offsets: bool = True
+    epsilon: float = EPSILON
+    rank_tolerance: float = 1e-6
+    max_inflation: float = 100.0
+    max_relative_std: float = 0.5
+    plausibility: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "filtering", Filtering(self.filtering))
+        for key in _NON_NEGATIVE:
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"identification setting {key}={value}: expected a finite number >= 0")
+        for key in ("max_inflation", "max_relative_std"):
+            value = getattr(self, key)
+            if not isinstance(value, (int, float)) or math.isnan(value) or value <= 0:
+                raise ValueError(f"identification setting {key}={value}: expected a number > 0 (inf: no check)")
+        if self.slip_threshold is not None and not (isinstance(self.slip_threshold, (int, float))
+                                                    and self.slip_threshold > 0):
+            raise ValueError(f"identification setting slip_threshold={self.slip_threshold}: expected a number "
+                             "> 0 in m/s (inf: no slip detection), or None (from the data)")
+        if self.epsilon <= 0 or self.mode_tolerance <= 0 or self.stretch_gap < 1:
+            raise ValueError("identification settings: epsilon and mode_tolerance must be > 0, stretch_gap >= 1")
+        if self.segments is not None:
+            from agvdyn.io import SEGMENTS
+
+            names = tuple(str(s).strip() for s in self.segments)
+            unknown = [n for n in names if n not in SEGMENTS]
+            if unknown:
+                raise ValueError(f"unknown segment names {unknown}: expected some of {list(SEGMENTS)}")
+            if not names:
+                raise ValueError(f"no segment names given: expected some of {list(SEGMENTS)}")
+            object.__setattr__(self, "segments", names)
+
+    def thresholds(self) -> dict[str, float]:
+        """Stiction threshold of each generalized coordinate name."""
+        steering = dict.fromkeys(STEERING_COORDINATES, self.steering_threshold)
+        return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_threshold), **steering}
+
+    def seconds(self, multiple: float) -> float:
+        """``multiple / filter.cutoff``: a time in units of the filter's time constant, s."""
+        return multiple / self.filter.cutoff
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "filter_cutoff_rad_s": self.filter.cutoff,
+            "filter_order": self.filter.order,
+            "derivative": self.filter.derivative.value,
+            "filtering": self.filtering.value,
+            "segments": None if self.segments is None else list(self.segments),
+            "slip_threshold": self.slip_threshold,
+            "torque_offsets": self.torque_offsets,
+            "plausibility": self.plausibility,
+        }
+        out.update({k: getattr(self, k) for k in _NON_NEGATIVE})
+        out.update(max_inflation=self.max_inflation, max_relative_std=self.max_relative_std)
+        return out

@@ -1,0 +1,81 @@
+"""Wheel slip from the redundant rolling constraints (eq. 1-3).
+
+Eight rolling constraints over-determine the three chassis velocities; the least-squares
+residual of eq. (3) per wheel (:func:`agvdyn.kinematics.odometry_with_slip`, m/s) is zero for a
+vehicle that rolls and grows where a wheel spins or slides. Rows whose slip speed exceeds a
+threshold taken from the residual's robust spread are wheel slip: they are dropped, with a
+guard, and each event is reported.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from agvdyn.identification.settings import IdentificationSettings
+from agvdyn.platform import WHEELS
+from agvdyn.signals import runs
+
+__all__ = ["SlipEvent", "slip_threshold", "slip_rows"]
+
+#: Scale of the median absolute deviation to a standard deviation of normal data.
+MAD_SCALE = 1.4826
+
+
+@dataclass(frozen=True)
+class SlipEvent:
+    """Rows ``t_start..t_end`` of one log whose slip speed exceeded the threshold."""
+
+    source: str
+    t_start: float
+    t_end: float
+    peak_mps: float
+    wheels: tuple[str, ...]
+    rows: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"source": self.source, "t_start": self.t_start, "t_end": self.t_end, "peak_mps": self.peak_mps,
+                "wheels": list(self.wheels), "rows": self.rows}
+
+
+def slip_threshold(speed: np.ndarray, settings: IdentificationSettings) -> float:
+    """Threshold (m/s) on the largest slip speed of a row: the setting, or robust from the data.
+
+    ``median + slip_spread * 1.4826 * MAD`` of ``speed`` (the rows in a motion mode), at least
+    ``slip_floor``: a few short slip events do not move median and MAD, so they stand out.
+    """
+    if settings.slip_threshold is not None:
+        return float(settings.slip_threshold)
+    if speed.size == 0:
+        return float(settings.slip_floor)
+    med = float(np.median(speed))
+    mad = MAD_SCALE * float(np.median(np.abs(speed - med)))
+    return max(med + settings.slip_spread * mad, float(settings.slip_floor))
+
+
+def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, guard_rows: int
+              ) -> tuple[np.ndarray, list[SlipEvent]]:
+    """Rows to drop (slip rows and ``guard_rows`` either side) and the slip events of one stretch.
+
+    Slip rows closer than ``2 * guard_rows`` are one event.
+    """
+    n = t.size
+    over = slip > threshold
+    hit = over.any(axis=1)
+    if not hit.any():
+        return np.zeros(n, dtype=bool), []
+    cs = np.concatenate([[0], np.cumsum(hit)])
+    lo = np.clip(np.arange(n) - guard_rows, 0, n)
+    hi = np.clip(np.arange(n) + guard_rows + 1, 0, n)
+    drop = cs[hi] - cs[lo] > 0
+    events = []
+    for a, b in runs(drop):
+        if not drop[a]:
+            continue
+        inside = np.flatnonzero(hit[a:b]) + a
+        first, last = int(inside[0]), int(inside[-1])
+        wheels = tuple(w for i, w in enumerate(WHEELS) if over[first:last + 1, i].any())
+        events.append(SlipEvent(source, float(t[first]), float(t[last]), float(slip[first:last + 1].max()),
+                                wheels, int(hit[first:last + 1].sum())))
+    return drop, events
