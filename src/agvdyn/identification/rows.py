@@ -16,7 +16,6 @@ are dropped; stiction rows (sec. 7) and a guard around them and around mode chan
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,7 +24,7 @@ import numpy as np
 from agvdyn.identification.equations import EquationBlock, projected_block
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
-from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, stretch_bounds
+from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
 from agvdyn.kinematics import Mode, detect_mode, kinematic_model
 from agvdyn.platform import Geometry
 from agvdyn.signals import guarded_mask, runs
@@ -148,8 +147,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     counts = RowCounts(samples=int(t.size), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
     bounds, notes = stretch_bounds(t, alpha, beta, settings)
     notes = [f"{source}: {n}" for n in notes]
-    padlen = settings.filter.padlen(float(np.median(np.diff(t))))
-    min_rows = max(padlen, 2 * int(math.ceil(settings.seconds(settings.edge_guard) * float(np.median(np.diff(t))) ** -1))) + 1
+    min_rows = min_stretch_rows(settings, float(np.median(np.diff(t))))
     stretches, modes = [], np.zeros(t.size, dtype=np.int8)
     for a, b in bounds:
         if b - a <= min_rows:

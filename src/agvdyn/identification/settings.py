@@ -78,7 +78,8 @@ class IdentificationSettings:
     steering_jump_rate, wheel_jump_rate : an angle step faster than this (rad/s) between two
         samples is a discontinuity (two recordings joined, an encoder reset): split there too.
     edge_guard : rows within ``edge_guard / filter.cutoff`` s of a stretch's ends are dropped
-        (the start and end transients of the zero-phase filter; 5 / 40 rad/s = 125 ms).
+        (the start and end transients of the zero-phase filter and of the derivatives of its
+        odd-extended ends; 10 / 40 rad/s = 250 ms).
     sample_jitter : largest relative deviation of a time step from the median inside a stretch.
 
     Rows (modes from the configuration; labels are hints)
@@ -115,7 +116,7 @@ class IdentificationSettings:
     stretch_gap: float = 3.0
     steering_jump_rate: float = 20.0
     wheel_jump_rate: float = 1000.0
-    edge_guard: float = 5.0
+    edge_guard: float = 10.0
     sample_jitter: float = 0.05
     mode_tolerance: float = MODE_TOLERANCE
     rest_speed: float = 0.01

@@ -22,7 +22,7 @@ from agvdyn.kinematics import odometry_with_slip
 from agvdyn.platform import Geometry
 from agvdyn.signals import filtered_derivatives, lowpass, time_derivative, uniform_sample_time
 
-__all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source"]
+__all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows"]
 
 
 def log_source(log: Any) -> str:
@@ -64,6 +64,16 @@ class Stretch:
     @property
     def q_dot(self) -> np.ndarray:
         return np.concatenate([self.chassis_dot, self.alpha_dot, self.beta_dot], axis=1)
+
+
+def edge_rows(settings: IdentificationSettings, dt: float) -> int:
+    """Rows dropped at each end of a stretch: the filter's transient."""
+    return int(math.ceil(settings.seconds(settings.edge_guard) / dt))
+
+
+def min_stretch_rows(settings: IdentificationSettings, dt: float) -> int:
+    """Fewest rows a stretch needs: more than the filter's padding and both edges."""
+    return max(settings.filter.padlen(dt), 2 * edge_rows(settings, dt)) + 1
 
 
 def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings
@@ -116,9 +126,9 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     else:
         torque = lowpass(torque, dt, settings.filter)
     n = t.size
-    edge_rows = int(math.ceil(settings.seconds(settings.edge_guard) / dt))
+    k = edge_rows(settings, dt)
     edge = np.zeros(n, dtype=bool)
-    edge[:edge_rows] = True
-    edge[max(n - edge_rows, 0):] = True
+    edge[:k] = True
+    edge[max(n - k, 0):] = True
     return Stretch(source, sl, t, dt, alpha, alpha_dot, alpha_ddot, beta_dot, beta_ddot, chassis_dot,
                    chassis_ddot, slip, signals, torque, edge)
