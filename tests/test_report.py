@@ -102,8 +102,15 @@ def test_cli_identify_table_validate_and_report(logs):
     assert report.stat().st_size > 10_000
 
 
+def test_cli_refusal_for_data_quality_exits_1(logs):
+    result = CliRunner().invoke(app, ["identify", str(logs["straight"]), "--out", str(logs["root"] / "x.yaml")])
+    assert result.exit_code == 1
+    assert "refused" in result.output and "cannot be identified" in result.output
+    assert not (logs["root"] / "x.yaml").exists()
+
+
 @pytest.mark.parametrize("args, message", [
-    (["identify", "{straight}", "--out", "{root}/x.yaml"], "cannot be identified"),
+    (["identify", "{ident}", "--out", "{root}/x.yaml", "--segments", "straigth"], "unknown segment names ['straigth']"),
     (["identify", "{ident}", "--out", "{root}/x.yaml", "--fix", "B_x=1"], "--fix"),
     (["identify", "{ident}", "--out", "{root}/x.yaml", "--filtering", "smooth"], "filtering"),
     (["identify", "{root}/missing.parquet", "--out", "{root}/x.yaml"], "missing.parquet"),

@@ -15,11 +15,21 @@ from agvdyn.identification import (
     DEFAULT_FIXED,
     Filtering,
     IdentificationSettings,
+    ImplausibleError,
+    UnidentifiableError,
     identify as identify_parameters,
     load_logs,
     platform_for,
 )
-from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, read_parameters
+from agvdyn.platform import (
+    PAPER_PARAMETERS,
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    PROTOTYPE,
+    platform_of_parameters,
+    read_parameters,
+    read_platform,
+)
 from agvdyn.signals import FilterSettings
 
 _FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. "
@@ -44,7 +54,11 @@ GuardOpt = Annotated[float, typer.Option(
 OffsetsOpt = Annotated[bool, typer.Option("--offsets/--no-offsets",
                                           help="Estimate constant motor-torque offsets with the parameters.")]
 SegmentsOpt = Annotated[Optional[str], typer.Option(
-    help="Comma-separated segment names to use; default: every segment with a mode.")]
+    help="Comma-separated segment labels whose rows are used; default: every row in a motion mode "
+         "(labels are hints: each row's mode comes from its configuration).")]
+SlipThresholdOpt = Annotated[Optional[float], typer.Option(
+    help="Wheel slip speed (m/s) above which rows are dropped as slip; default: from the robust spread of "
+         "the log's rolling-constraint residual; inf: no slip detection.")]
 MaxInflationOpt = Annotated[float, typer.Option(
     help="Refuse parameters whose variance inflation factor exceeds this (inf: no check).")]
 MaxRelativeStdOpt = Annotated[float, typer.Option(
@@ -74,15 +88,31 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
               steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
-              max_inflation: float = 100.0, max_relative_std: float = 0.5) -> IdentificationSettings:
+              max_inflation: float = 100.0, max_relative_std: float = 0.5,
+              slip_threshold: Optional[float] = None) -> IdentificationSettings:
+    try:
+        mode = Filtering(filtering)
+    except ValueError:
+        raise fail(f"--filtering {filtering!r}: expected one of {[f.value for f in Filtering]}") from None
     try:
         return IdentificationSettings(
-            filter=FilterSettings(cutoff=cutoff, order=order), filtering=Filtering(filtering),
+            filter=FilterSettings(cutoff=cutoff, order=order), filtering=mode,
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
             stiction_guard=guard, max_inflation=max_inflation, max_relative_std=max_relative_std,
+            slip_threshold=slip_threshold,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
-        raise fail(f"{exc} (filtering must be one of {[f.value for f in Filtering]})") from exc
+        raise fail(str(exc)) from exc
+
+
+def _identified(logs, geometry, fixed, settings):
+    """identify(), with refusals for data quality as exit code 1 and bad input as exit code 2."""
+    try:
+        return identify_parameters(logs, geometry, fixed=fixed, settings=settings)
+    except (UnidentifiableError, ImplausibleError) as exc:
+        raise fail(f"refused: {exc}", code=1) from exc
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
 
 
 def _load(paths: list[Path], mapping: Optional[Path], platform: Optional[Path]):
@@ -123,17 +153,18 @@ def identify(
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,
     max_relative_std: MaxRelativeStdOpt = 0.5,
+    slip_threshold: SlipThresholdOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file."""
+    """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
+
+    Exit codes: 0 identified, 1 refused for data quality (not excited, implausible), 2 bad input.
+    """
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std)
+                         max_inflation, max_relative_std, slip_threshold)
     loaded, geometry = _load(logs, mapping, platform)
-    try:
-        ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
-    except ValueError as exc:
-        raise fail(str(exc)) from exc
+    ident = _identified(loaded, geometry, fixed, settings)
     try:
         written = ident.write(out)
     except OSError as exc:
@@ -150,9 +181,28 @@ def identify(
     if ident.offsets:
         console.print("motor-torque offsets (N m, motor side): " +
                       ", ".join(f"{k} {v:+.4f} +- {ident.offsets_std[k]:.2g}" for k, v in ident.offsets.items()))
+    console.print(_rows_line(ident))
+    for event in ident.slip_events:
+        console.print(f"wheel slip: {event.source} t = {event.t_start:.3f}..{event.t_end:.3f} s, peak "
+                      f"{event.peak_mps:.3g} m/s, wheels {', '.join(event.wheels)} ({event.rows} rows)")
     for note in ident.notes:
         console.print(f"note: {note}")
+    for warning in ident.warnings:
+        console.print(f"[yellow]warning:[/yellow] {warning}")
     console.print(f"wrote {written}")
+
+
+def _rows_line(ident) -> str:
+    r = ident.rows
+    parts = [f"{r.used:,} of {r.samples:,} samples used"]
+    parts += [f"{n:,} {what}" for n, what in (
+        (r.edge, "at the filter edges"), (r.slip, "wheel slip"), (r.no_mode, "in no motion mode"),
+        (r.not_selected, "in unselected segments"), (r.too_short, "in too short stretches")) if n]
+    if sum(r.clipped_stop.values()):
+        parts.append(f"{sum(r.clipped_stop.values()):,} clipped to the steering stops")
+    if r.label_mismatch:
+        parts.append("labels off the detected mode: " + ", ".join(f"{k} {v:,}" for k, v in r.label_mismatch.items()))
+    return "rows: " + "; ".join(parts)
 
 
 def _nan_safe(x: float) -> str:
@@ -163,7 +213,9 @@ def _nan_safe(x: float) -> str:
 def validate(
     log: Path = typer.Argument(..., metavar="LOG", help="Validation log not used for identification (e.g. the lane change)."),
     params: Path = typer.Option(..., "--params", help="Parameter file (YAML/JSON) to validate."),
-    platform: PlatformOpt = None,
+    platform: Annotated[Optional[Path], typer.Option(
+        help="Platform file (YAML); default: the platform stored in the parameter file, else the log "
+             "sidecar's, else the built-in prototype.")] = None,
     mapping: MappingOpt = None,
     filtering: FilteringOpt = "parallel",
     cutoff: CutoffOpt = 40.0,
@@ -177,10 +229,23 @@ def validate(
     from agvdyn.validation import validate as validate_log
 
     settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard)
-    (loaded,), geometry = _load([log], mapping, platform)
     try:
-        parameters = read_parameters(params).parameters
-        val = validate_log(loaded, parameters, geometry, settings=settings)
+        content = read_parameters(params)
+        override = None if platform is None else read_platform(platform)
+    except (ValueError, OSError) as exc:
+        raise fail(str(exc)) from exc
+    (loaded,), log_geometry = _load([log], mapping, platform)
+    geometry = log_geometry
+    if content.geometry is not None or override is not None:
+        geometry, warning = platform_of_parameters(content, override)
+        if warning:
+            typer.secho(f"warning: {warning}", fg=typer.colors.YELLOW, err=True)
+        elif override is None and not geometry.same_shape(log_geometry) and log_geometry is not PROTOTYPE:
+            typer.secho(f"warning: the log's sidecar names another platform ({log_geometry.describe()}) than the "
+                        f"parameter file ({geometry.describe()}); using the parameter file's", fg=typer.colors.YELLOW,
+                        err=True)
+    try:
+        val = validate_log(loaded, content.parameters, geometry, settings=settings)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     if as_json:
@@ -214,6 +279,7 @@ def report(
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,
     max_relative_std: MaxRelativeStdOpt = 0.5,
+    slip_threshold: SlipThresholdOpt = None,
 ) -> None:
     """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
     from agvdyn.report import reference_parameters, write_report
@@ -221,10 +287,10 @@ def report(
 
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std)
+                         max_inflation, max_relative_std, slip_threshold)
     loaded, geometry = _load(ident_logs, mapping, platform)
+    ident = _identified(loaded, geometry, fixed, settings)
     try:
-        ident = identify_parameters(loaded, geometry, fixed=fixed, settings=settings)
         val = None
         if validation is not None:
             (val_log,), _ = _load([validation], mapping, platform)
