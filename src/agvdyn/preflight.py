@@ -1,0 +1,167 @@
+"""Pre-flight check of identification logs (``agvdyn inspect``): is this data good enough, and if
+not, which experiment is missing for which parameter.
+
+Per file: timing, dropouts, the motion-mode timeline the identification will use (from the
+filtered configuration, next to the labels), rows clipped at the steering stops, wheel slip,
+and the account of the rows. Over all files: how well each parameter is excited by the rows
+kept (rank, variance inflation, relative standard deviation of a trial fit), and a verdict.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from agvdyn.identification import (
+    DEFAULT_FIXED,
+    EXCITATION,
+    OFFSET_NAMES,
+    IdentificationSettings,
+    LeastSquares,
+    LogRows,
+    dependent_parameters,
+    log_rows,
+    stacked_system,
+    variance_inflation,
+)
+from agvdyn.identification.stretches import stretch_bounds
+from agvdyn.io.summary import LogSummary, summarize_log
+from agvdyn.kinematics import Mode
+from agvdyn.platform import PARAMETER_NAMES, Geometry
+from agvdyn.signals import runs
+
+__all__ = ["Excitation", "FileCheck", "Preflight", "preflight"]
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """How well the rows kept excite one parameter: ``status`` is ``ok``, ``weak``, ``not excited`` or ``fixed``."""
+
+    name: str
+    status: str
+    inflation: float = math.nan
+    relative_std: float = math.nan
+
+    @property
+    def excited_by(self) -> str:
+        return EXCITATION.get(self.name, "")
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+
+        return {"status": self.status, "variance_inflation": num(self.inflation),
+                "relative_std": num(self.relative_std), "excited_by": self.excited_by}
+
+
+@dataclass(frozen=True, eq=False)
+class FileCheck:
+    """One file: its summary (eq. 9 on the raw angles, labels), the identification's rows, gaps."""
+
+    summary: LogSummary
+    rows: LogRows
+    timeline: tuple[tuple[str, float, float], ...]
+    gaps: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        out = self.summary.to_dict()
+        out.update({
+            "gaps": list(self.gaps),
+            "mode_timeline": [{"mode": m, "start": a, "end": b} for m, a, b in self.timeline],
+            "rows": self.rows.counts.to_dict(),
+            "clipped_stop_rows": dict(self.rows.counts.clipped_stop),
+            "slip_events": [e.to_dict() for e in self.rows.slip_events],
+            "slip_threshold_mps": self.rows.slip_threshold,
+        })
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Preflight:
+    """Result of :func:`preflight`."""
+
+    files: tuple[FileCheck, ...]
+    excitation: tuple[Excitation, ...]
+    ready: bool
+    verdict: str
+    warnings: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        first = self.files[0].to_dict() if self.files else {}
+        return {**first, "files": [f.to_dict() for f in self.files],
+                "excitation": {e.name: e.to_dict() for e in self.excitation},
+                "ready": self.ready, "verdict": self.verdict, "warnings": list(self.warnings)}
+
+
+def _timeline(t: np.ndarray, modes: np.ndarray, min_duration: float) -> tuple[tuple[str, float, float], ...]:
+    """Runs of the identification's row modes as (label, t_start, t_end); runs shorter than
+    ``min_duration`` merged into the preceding one."""
+    out: list[list[Any]] = []
+    for a, b in runs(modes):
+        label = Mode(int(modes[a])).label if modes[a] else "none"
+        if out and (out[-1][0] == label or t[b - 1] - t[a] < min_duration):
+            out[-1][2] = float(t[b - 1])
+        else:
+            out.append([label, float(t[a]), float(t[b - 1])])
+    return tuple((m, a, b) for m, a, b in out)
+
+
+def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: IdentificationSettings
+                ) -> list[Excitation]:
+    blocks = [b for r in rows for b in r.blocks]
+    A, y = stacked_system(blocks, offsets=settings.torque_offsets)
+    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if settings.torque_offsets else [])
+    free = [n for n in names if n not in fixed]
+    out = {n: Excitation(n, "fixed") for n in PARAMETER_NAMES if n in fixed}
+    if A.shape[0] <= len(free):
+        out.update({n: Excitation(n, "not excited") for n in free if n in PARAMETER_NAMES})
+        return [out[n] for n in PARAMETER_NAMES]
+    idx = [names.index(n) for n in free]
+    A1 = A[:, idx]
+    y1 = y - A[:, [names.index(n) for n in fixed]] @ np.array(list(fixed.values())) if fixed else y
+    missing = {d.name for d in dependent_parameters(A1, free, tolerance=settings.rank_tolerance)}
+    keep = [i for i, n in enumerate(free) if n not in missing]
+    inflation = variance_inflation(A1[:, keep])
+    est = LeastSquares().fit(A1[:, keep], y1)
+    for j, i in enumerate(keep):
+        n = free[i]
+        if n not in PARAMETER_NAMES:
+            continue
+        rel = float(est.std_[j] / abs(est.coef_[j])) if est.coef_[j] != 0 else math.inf
+        weak = inflation[j] > settings.max_inflation or rel > settings.max_relative_std
+        out[n] = Excitation(n, "weak" if weak else "ok", float(inflation[j]), rel)
+    out.update({n: Excitation(n, "not excited") for n in missing if n in PARAMETER_NAMES})
+    return [out[n] for n in PARAMETER_NAMES]
+
+
+def preflight(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
+              settings: IdentificationSettings = IdentificationSettings(), min_duration: float = 0.05) -> Preflight:
+    """Check logs before identifying: per-file facts, excitation per parameter, verdict."""
+    files, all_rows, warnings = [], [], []
+    for log in logs:
+        rows = log_rows(log, geometry, settings)
+        all_rows.append(rows)
+        _, cuts = stretch_bounds(log.t, log.alpha, log.beta, settings)
+        files.append(FileCheck(summarize_log(log, geometry, tolerance=settings.mode_tolerance, min_duration=min_duration),
+                               rows, _timeline(log.t, rows.modes, min_duration), tuple(cuts)))
+        c = rows.counts
+        if rows.slip_events:
+            warnings.append(f"{rows.source}: {len(rows.slip_events)} wheel-slip events, {c.slip:,} rows dropped")
+        if sum(c.clipped_stop.values()):
+            warnings.append(f"{rows.source}: {sum(c.clipped_stop.values()):,} steering samples clipped to the stops")
+        if c.no_mode:
+            warnings.append(f"{rows.source}: {c.no_mode:,} rows with the chassis moving in no motion mode (left out)")
+        if c.too_short:
+            warnings.append(f"{rows.source}: {c.too_short:,} rows in stretches too short to filter (left out)")
+    excitation = _excitation(all_rows, fixed, settings)
+    lacking = [e for e in excitation if e.status in ("weak", "not excited")]
+    if not lacking:
+        verdict = f"ready: all {sum(e.status == 'ok' for e in excitation)} free parameters are well excited"
+    else:
+        missing = sorted({e.excited_by for e in lacking})
+        verdict = ("not ready: " + ", ".join(f"{e.name} ({e.status})" for e in lacking) +
+                   "; record: " + "; ".join(missing))
+    return Preflight(tuple(files), tuple(excitation), not lacking, verdict, tuple(warnings))
