@@ -130,22 +130,19 @@ def main() -> None:
     print(f"  largest relative parameter error on the noise-free model log: {err:.2e}")
 
     # same regression from the same filtered signals: vectorised vs per-sample
-    from agvdyn.identification import _filtered_kinematics, _chassis_velocity  # noqa: PLC0415
+    from agvdyn.identification.rows import row_modes  # noqa: PLC0415
+    from agvdyn.identification.stretches import filtered_stretch, stretch_bounds  # noqa: PLC0415
+    from agvdyn.kinematics import Mode  # noqa: PLC0415
     from agvdyn.signals import runs  # noqa: PLC0415
 
-    names = log.segments
     inputs = []
-    for start, stop in runs(names):
-        kin = _filtered_kinematics(log.t[start:stop], log.alpha[start:stop], log.beta[start:stop], settings, "bench")
-        mode = {"steer_left": "1", "steer_right": "1", "straight": "2s", "rotation": "4"}[names[start]]
-        from agvdyn.kinematics import Mode  # noqa: PLC0415
-
-        mode = Mode.from_label(mode)
-        chassis = _chassis_velocity(PROTOTYPE, mode, kin.alpha, kin.alpha_dot, kin.beta_dot)
-        q_dot = np.concatenate([chassis, kin.alpha_dot, kin.beta_dot], axis=1)
-        q_ddot = np.concatenate([np.gradient(chassis, kin.dt, axis=0, edge_order=2), kin.alpha_ddot,
-                                 kin.beta_ddot], axis=1)
-        inputs.append((mode, kin.alpha, q_dot, q_ddot, log.torque[start:stop]))
+    for a, b in stretch_bounds(log.t, log.alpha, log.beta, settings)[0]:
+        st = filtered_stretch(PROTOTYPE, log, a, b, settings)
+        modes = row_modes(PROTOTYPE, st, settings)
+        q_ddot = np.concatenate([st.chassis_ddot, st.alpha_ddot, st.beta_ddot], axis=1)
+        for c, d in runs(modes):
+            if modes[c]:
+                inputs.append((Mode(int(modes[c])), st.alpha[c:d], st.q_dot[c:d], q_ddot[c:d], st.torque[c:d]))
     t0 = time.perf_counter()
     vec_blocks = [equation_block(PROTOTYPE, m, a, qd, qdd, u, stiction_threshold=0.0) for m, a, qd, qdd, u in inputs]
     fit_blocks(vec_blocks, PROTOTYPE)

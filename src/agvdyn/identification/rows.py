@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from agvdyn.identification.equations import EquationBlock, projected_block
 from agvdyn.identification.settings import IdentificationSettings
@@ -93,29 +94,56 @@ def row_modes(geometry: Geometry, st: Stretch, settings: IdentificationSettings)
     rest = np.max(np.abs(rolling), axis=1) * geometry.r < settings.rest_speed
     steering = np.max(np.abs(st.alpha_dot), axis=1) > settings.steering_rest_rate
     mode = config.copy()
-    mode[rest & steering] = Mode.PARKING
+    mode[rest & steering] = int(Mode.PARKING)
     moving = ~rest
-    mode[moving & (config == Mode.PARKING)] = NO_MODE
-    mode[moving & steering & (config == Mode.STRAIGHT)] = Mode.CAR_LIKE
-    mode[moving & steering & np.isin(config, (Mode.LATERAL, Mode.ROTATION))] = NO_MODE
+    mode[moving & (config == int(Mode.PARKING))] = NO_MODE
+    moving_steered = moving & steering
+    mode[moving_steered & (config == int(Mode.STRAIGHT))] = int(Mode.CAR_LIKE)
+    mode[moving_steered & ((config == int(Mode.LATERAL)) | (config == int(Mode.ROTATION)))] = NO_MODE
     return mode
 
 
-def _labels(log: Any) -> np.ndarray | None:
-    seg = getattr(log, "segments", None)
-    return None if seg is None else np.asarray(seg, dtype=object)
+@dataclass(frozen=True)
+class _Labels:
+    """Segment labels as integer codes into ``names`` (``""``: no label)."""
+
+    names: tuple[str, ...]
+    codes: np.ndarray
+
+    @classmethod
+    def of(cls, log: Any) -> "_Labels | None":
+        frame = getattr(log, "frame", None)
+        column = None if frame is None or "segment" not in frame.columns else frame["segment"]
+        if column is not None and isinstance(column.dtype, pd.CategoricalDtype):  # our logs: no string pass
+            names = ("", *(str(c) for c in column.cat.categories))
+            return cls(names, column.cat.codes.to_numpy().astype(np.int32) + 1)
+        seg = getattr(log, "segments", None)
+        if seg is None:
+            return None
+        names, codes = np.unique(np.asarray(seg).astype(str), return_inverse=True)
+        return cls(tuple(str(n) for n in names), codes.astype(np.int32))
+
+    def selected(self, wanted: tuple[str, ...], sl: slice) -> np.ndarray:
+        return np.isin(self.codes[sl], [i for i, n in enumerate(self.names) if n in wanted])
 
 
-def _count_mismatch(counts: RowCounts, labels: np.ndarray, mode: np.ndarray) -> None:
-    for name, expected in LABEL_MODES.items():
-        rows = labels == name
+def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndarray) -> None:
+    codes = labels.codes[sl]
+    for code, name in enumerate(labels.names):
+        expected = LABEL_MODES.get(name)
+        if expected is None:
+            continue
+        rows = codes == code
         if rows.any():
-            off = int(np.count_nonzero(rows & ~np.isin(mode, [int(m) for m in expected])))
+            ok = np.zeros_like(rows)
+            for m in expected:
+                ok |= mode == int(m)
+            off = int(np.count_nonzero(rows & ~ok))
             if off:
                 counts.label_mismatch[name] = counts.label_mismatch.get(name, 0) + off
 
 
-def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: np.ndarray | None,
+def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: _Labels | None,
                     settings: IdentificationSettings) -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there)."""
@@ -133,9 +161,12 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: n
         keep = guarded_mask(block.keep & usable[a:b, None], guard)
         block = EquationBlock(block.source, block.segment, m, block.t, block.regressor, block.torque, block.s_dot,
                               keep, block.offset_regressor)
-        names = labels[a:b] if labels is not None else np.full(b - a, "", dtype=object)
-        for c, d in runs(names):
-            blocks.append(block.rows(slice(c, d), str(names[c]) or f"mode {m.label}"))
+        if labels is None:
+            blocks.append(block)
+            continue
+        codes = labels.codes[st.rows][a:b]
+        for c, d in runs(codes):
+            blocks.append(block.rows(slice(c, d), labels.names[codes[c]] or f"mode {m.label}"))
     return blocks
 
 
@@ -143,7 +174,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped."""
     source = log_source(log)
     t, alpha, beta = log.t, log.alpha, log.beta
-    labels = _labels(log)
+    labels = _Labels.of(log)
     counts = RowCounts(samples=int(t.size), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
     bounds, notes = stretch_bounds(t, alpha, beta, settings)
     notes = [f"{source}: {n}" for n in notes]
@@ -160,17 +191,17 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         modes[a:b] = row_modes(geometry, st, settings)
     counts.stretches = len(stretches)
     in_mode = [(st, modes[st.rows]) for st in stretches]
-    speeds = np.concatenate([st.slip[(m != NO_MODE) & ~st.edge].max(axis=1) for st, m in in_mode] or [np.zeros(0)])
+    speeds = np.concatenate([st.slip.max(axis=1)[(m != NO_MODE) & ~st.edge] for st, m in in_mode] or [np.zeros(0)])
     threshold = slip_threshold(speeds, settings)
     slip_guard = settings.slip_guard
     blocks, events = [], []
     for st, mode in in_mode:
-        lab = None if labels is None else labels[st.rows]
         drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
         events += ev
-        selected = np.ones(st.n, dtype=bool) if settings.segments is None or lab is None else np.isin(lab, settings.segments)
-        if settings.segments is not None and lab is None:
-            selected[:] = False
+        if settings.segments is None:
+            selected = np.ones(st.n, dtype=bool)
+        else:
+            selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(settings.segments, st.rows)
         in_a_mode = mode != NO_MODE
         counts.edge += int(np.count_nonzero(st.edge))
         rest = ~st.edge
@@ -184,9 +215,9 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         for m in np.unique(mode[usable]):
             label = Mode(int(m)).label
             counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & (mode == m)))
-        if lab is not None:
-            _count_mismatch(counts, lab, mode)
-        blocks += _stretch_blocks(geometry, st, mode, usable, lab, settings)
+        if labels is not None:
+            _count_mismatch(counts, labels, st.rows, mode)
+        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings)
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
 
 
