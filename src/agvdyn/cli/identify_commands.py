@@ -32,8 +32,9 @@ from agvdyn.platform import (
 )
 from agvdyn.signals import FilterSettings
 
-_FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. "
-             "'--fix none' estimates all eleven (needs car-like motion in the logs).")
+_FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. '--fix none' estimates all "
+             "eleven: B_w is then told from m_ch and C_ch only by car-like motion with strong wheel accelerations, "
+             "and refused as collinear, naming the three, when the logs lack it.")
 
 
 # Options shared by identify, validate and report: one declaration each, so the commands agree.

@@ -74,10 +74,13 @@ class UnidentifiableError(ValueError):
         self.dependencies = tuple(dependencies)
         names = [d.name for d in self.dependencies]
         lines = "\n  ".join(d.describe() for d in self.dependencies)
-        super().__init__(
-            f"{context}parameters {names} cannot be identified from these data:\n  {lines}\n"
-            f"add the experiments named above or fix the parameters as known (e.g. --fix {names[0]}=VALUE)"
-        )
+        if "B_w" in names:
+            advice = "record the experiments named above, or fix B_w from a single-axis test (--fix B_w=VALUE)"
+        elif any(n.startswith("offset_") for n in names):
+            advice = "record the experiments named above, or do not estimate motor-torque offsets (--no-offsets)"
+        else:
+            advice = "record the experiments named above"
+        super().__init__(f"{context}parameters {names} cannot be identified from these data:\n  {lines}\n{advice}")
 
 
 def column_norms(A: np.ndarray) -> np.ndarray:
