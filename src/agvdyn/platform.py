@@ -199,7 +199,9 @@ def _load_mapping(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise PlatformFileError(f"{path}: cannot be read ({exc.strerror})") from exc
+        raise PlatformFileError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise PlatformFileError(f"{path}: not a text file (not UTF-8 at byte {exc.start}): expected YAML or JSON") from exc
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (yaml.YAMLError, json.JSONDecodeError) as exc:

@@ -31,6 +31,8 @@ def platform_option(path: Optional[Path]) -> Geometry:
         return read_platform(path)
     except PlatformFileError as exc:
         raise fail(str(exc)) from exc
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise fail(f"{path}: cannot be read as a platform file: {exc}") from exc
 
 
 @app.callback()

@@ -11,18 +11,33 @@ from rich.table import Table
 
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.platform import PAPER_PARAMETERS, SAMPLE_TIME, PlatformFileError, read_parameters
+from agvdyn.platform import (
+    PAPER_PARAMETERS,
+    SAMPLE_TIME,
+    ParameterFile,
+    PlatformFileError,
+    platform_of_parameters,
+    read_parameters,
+)
 
 _EXPERIMENT_HELP = "identification, lane-change, lateral, or a trajectory file (.csv / .yaml, see docs/simulation.md)."
+
+
+def _parameter_file(path: Path) -> ParameterFile:
+    """The contents of a --params file; a bad file (missing, a directory, not YAML/JSON, not a
+    parameter file) is a named error, never a traceback."""
+    try:
+        return read_parameters(path)
+    except PlatformFileError as exc:
+        raise fail(str(exc)) from exc
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise fail(f"{path}: cannot be read as a parameter file: {exc}") from exc
 
 
 def _params(path: Optional[Path], default=PAPER_PARAMETERS):
     if path is None:
         return default
-    try:
-        return read_parameters(path).parameters
-    except PlatformFileError as exc:
-        raise fail(str(exc)) from exc
+    return _parameter_file(path).parameters
 
 
 def _output(path: Path) -> Path:
@@ -59,12 +74,15 @@ def simulate(
                                                       "limits; see docs/simulation.md)."),
     ideal_plant: bool = typer.Option(False, "--ideal-plant", help="Switch the neglected effects off (tanh "
                                      "friction, no unit masses, no torque limit, exact wheel radii)."),
+    slip: bool = typer.Option(False, "--slip", help="Switch the default wheel-slip scenario on (slippery floor "
+                              "and motor torque bursts in the straight and rotation of 'identification'; "
+                              "replaces a slip group of --settings; see docs/simulation.md)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar and no table."),
 ) -> None:
     """Simulate an experiment in closed loop (plant with tyre slip) and write the log the sensors record."""
     from dataclasses import replace
 
-    from agvdyn.simulation import SimulationSettings, read_settings, simulate as run
+    from agvdyn.simulation import SLIP_SCENARIO, SLIP_THRESHOLD, SimulationSettings, read_settings, simulate as run
     from agvdyn.trajectories import TrajectoryError
 
     try:
@@ -73,6 +91,8 @@ def simulate(
         raise fail(str(exc)) from exc
     if ideal_plant:
         sim_settings = replace(sim_settings, plant=sim_settings.plant.ideal())
+    if slip:
+        sim_settings = replace(sim_settings, slip=SLIP_SCENARIO)
     geom = platform_option(platform)
     true_params = _params(params)
     ctrl_params = _params(controller_params, true_params)
@@ -100,6 +120,12 @@ def simulate(
         console.print(_tracking_table(result))
         fs = result.trajectory.floor_space()
         console.print(f"floor space {fs.length:.2f} m x {fs.width:.2f} m, duration {result.trajectory.duration:.1f} s")
+        if sim_settings.slip.active:
+            events = result.slip_intervals()
+            console.print(f"true wheel slip: {len(events)} events, "
+                          f"{int((result.slip_speed > SLIP_THRESHOLD).any(axis=1).sum())} samples above "
+                          f"{SLIP_THRESHOLD} m/s "
+                          "(sidecar: slip_truth)")
     typer.echo(f"wrote {path} ({result.trajectory.n_samples} samples) and {path}.yaml")
 
 
@@ -108,7 +134,8 @@ def feedforward(
     experiment: str = typer.Argument(..., help=_EXPERIMENT_HELP),
     params: Path = typer.Option(..., help="Parameter file (YAML/JSON) of the feed-forward, eq. (21)."),
     out: Path = typer.Option(..., "--out", help="Table to write (.csv or .parquet)."),
-    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the platform stored in "
+                                            "the parameter file, else the built-in prototype."),
     no_check: bool = typer.Option(False, "--no-check", help="Write the table even if the trajectory breaks "
                                   "the velocity, acceleration or torque limits."),
 ) -> None:
@@ -116,11 +143,13 @@ def feedforward(
     from agvdyn.simulation import feedforward_table
     from agvdyn.trajectories import Limits, TrajectoryError
 
-    geom = platform_option(platform)
-    p = _params(params)
+    content = _parameter_file(params)
+    geom, warning = platform_of_parameters(content, None if platform is None else platform_option(platform))
+    if warning is not None:
+        typer.secho(f"warning: {warning}", fg=typer.colors.YELLOW, err=True)
     _output(out)
     try:
-        table = feedforward_table(experiment, p, geom, limits=None if no_check else Limits())
+        table = feedforward_table(experiment, content.parameters, geom, limits=None if no_check else Limits())
     except (TrajectoryError, ValueError) as exc:
         raise fail(str(exc)) from exc
     if out.suffix.lower() == ".csv":

@@ -25,10 +25,20 @@ import pandas as pd
 
 from agvdyn.kinematics import odometry
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
-from agvdyn.simulation._kernels import run_chunk
+from agvdyn.simulation._kernels import contact_points, run_chunk, slip_speeds
 from agvdyn.simulation.controller import STATE_SIZE, ControllerSettings
 from agvdyn.simulation.plant import PlantSettings, plant_constants, run_open_loop
 from agvdyn.simulation.sensors import SensorSettings, draw_noise
+from agvdyn.simulation.slip import (
+    MERGE_GAP,
+    SLIP_SCENARIO,
+    SLIP_THRESHOLD,
+    FrictionPatch,
+    SlipInterval,
+    SlipSettings,
+    TorqueBurst,
+    slip_intervals as _slip_intervals,
+)
 from agvdyn.trajectories import (
     Limits,
     Trajectory,
@@ -42,6 +52,7 @@ from agvdyn.trajectories import (
 __all__ = [
     "ControllerSettings", "PlantSettings", "SensorSettings", "SimulationSettings", "SimulationResult",
     "simulate", "feedforward_table", "run_open_loop", "plant_constants", "read_settings", "settings_from_dict",
+    "SlipSettings", "FrictionPatch", "TorqueBurst", "SlipInterval", "SLIP_SCENARIO", "SLIP_THRESHOLD",
 ]
 
 #: Samples simulated between two progress reports.
@@ -53,7 +64,8 @@ class SimulationSettings:
     """Everything about a simulation run besides platform, parameters and seed.
 
     ``check_limits``: refuse (LimitError) a trajectory whose planned velocities, accelerations
-    or feed-forward torques break ``limits`` before simulating it.
+    or feed-forward torques break ``limits`` before simulating it. ``slip``: the wheel-slip
+    scenario (low-friction patches, torque bursts; none by default, see :mod:`agvdyn.simulation.slip`).
     """
 
     plant: PlantSettings = field(default_factory=PlantSettings)
@@ -62,16 +74,19 @@ class SimulationSettings:
     limits: Limits = field(default_factory=Limits)
     check_limits: bool = True
     sample_time: float = SAMPLE_TIME
+    slip: SlipSettings = field(default_factory=SlipSettings)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sample_time) and self.sample_time > 0):
             raise ValueError(f"sample_time={self.sample_time!r}: expected > 0 s")
+        if not isinstance(self.slip, SlipSettings):
+            raise ValueError(f"slip={self.slip!r}: expected a SlipSettings (see agvdyn.simulation.slip)")
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "plant": self.plant.to_dict(), "controller": self.controller.to_dict(),
             "sensors": self.sensors.to_dict(), "limits": dict(self.limits.__dict__),
-            "check_limits": self.check_limits, "sample_time": self.sample_time,
+            "check_limits": self.check_limits, "sample_time": self.sample_time, "slip": self.slip.to_dict(),
         }
 
 
@@ -81,13 +96,14 @@ _SETTING_GROUPS = {"plant": PlantSettings, "controller": ControllerSettings, "se
 
 def settings_from_dict(data: dict[str, Any], source: str = "<settings>") -> SimulationSettings:
     """SimulationSettings from a mapping ``{plant: {...}, controller: {...}, sensors: {...}, limits: {...},
-    check_limits: bool}``; unset keys keep their defaults, unknown keys are an error naming them."""
+    slip: {patches: [...], bursts: [...]}, check_limits: bool}``; unset keys keep their defaults,
+    unknown keys are an error naming them."""
     if not isinstance(data, dict):
         raise ValueError(f"{source}: expected a mapping at the top level")
-    unknown = set(data) - set(_SETTING_GROUPS) - {"check_limits", "sample_time"}
+    unknown = set(data) - set(_SETTING_GROUPS) - {"check_limits", "sample_time", "slip"}
     if unknown:
         raise ValueError(f"{source}: unknown keys {sorted(unknown)}: expected some of "
-                         f"{sorted([*_SETTING_GROUPS, 'check_limits', 'sample_time'])}")
+                         f"{sorted([*_SETTING_GROUPS, 'check_limits', 'sample_time', 'slip'])}")
     groups: dict[str, Any] = {}
     for key, cls in _SETTING_GROUPS.items():
         values = data.get(key) or {}
@@ -104,7 +120,8 @@ def settings_from_dict(data: dict[str, Any], source: str = "<settings>") -> Simu
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {key}: {exc}") from exc
     extra = {k: data[k] for k in ("check_limits", "sample_time") if k in data}
-    return SimulationSettings(**groups, **extra)
+    slip = SlipSettings.from_dict(data.get("slip"), source)
+    return SimulationSettings(**groups, **extra, slip=slip)
 
 
 def read_settings(path: str | os.PathLike) -> SimulationSettings:
@@ -114,7 +131,7 @@ def read_settings(path: str | os.PathLike) -> SimulationSettings:
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ValueError(f"{path}: cannot be read as YAML: {exc}") from exc
     return settings_from_dict(data or {}, str(path))
 
@@ -126,9 +143,11 @@ class SimulationResult:
     True plant: ``position`` (N, 9) = (X, Y, gamma, alpha_l, alpha_r, beta_fl, beta_rl, beta_fr, beta_rr),
     ``velocity`` (N, 9) (body-frame chassis velocities, PLATFORM.md order). Plan: ``q_dot_d``,
     ``pose_d`` (N, 3), ``beta_d`` (N, 4), ``feedforward`` (N, 4). Sensors: ``alpha_measured`` (N, 2),
-    ``beta_measured`` (N, 4), ``torque_measured`` (N, 4). Drive: ``torque_command`` (N, 4) and
-    ``torque_applied`` (N, 4) after the torque limit. Energy: ``energy`` (N,) kinetic energy,
-    ``work`` (N, 3) cumulative (motor, dissipated, stops) work.
+    ``beta_measured`` (N, 4), ``torque_measured`` (N, 4). Drive: ``torque_command`` (N, 4),
+    ``torque_burst`` (N, 4) the slip scenario's torque bursts (zero without one) and
+    ``torque_applied`` (N, 4) = command after the torque limit + burst, what the motors apply.
+    Energy: ``energy`` (N,) kinetic energy, ``work`` (N, 3) cumulative (motor, dissipated, stops) work.
+    True slip: ``slip_speed`` (N, 4), ``contact_points`` (N, 4, 2), :meth:`slip_intervals`.
     """
 
     trajectory: Trajectory
@@ -149,6 +168,7 @@ class SimulationResult:
     torque_measured: np.ndarray
     energy: np.ndarray
     work: np.ndarray
+    torque_burst: np.ndarray
 
     @property
     def t(self) -> np.ndarray:
@@ -166,6 +186,27 @@ class SimulationResult:
     def pose_d(self) -> np.ndarray:
         """Planned pose (N, 3) in the world frame of the start."""
         return pose_from_velocities(self.q_dot_d[:, :3], self.settings.sample_time)
+
+    @cached_property
+    def _constants(self) -> np.ndarray:
+        return plant_constants(self.geometry, self.plant_params, self.settings.plant)
+
+    @cached_property
+    def slip_speed(self) -> np.ndarray:
+        """True slip speed (N, 4), m/s, of each wheel's contact point: the norm of its lateral and
+        longitudinal slip velocity (rows of ``A(alpha) v``, eq. 1-2, with the true rolling radii)."""
+        return slip_speeds(self._constants, self.position, self.velocity)
+
+    @cached_property
+    def contact_points(self) -> np.ndarray:
+        """True world positions (N, 4, 2) of the contact points (frame of the start), m."""
+        return contact_points(self._constants, self.position)
+
+    def slip_intervals(self, threshold: float = SLIP_THRESHOLD, merge_gap: float = MERGE_GAP) -> list[SlipInterval]:
+        """True slip intervals: runs of samples in which some wheel's :attr:`slip_speed` exceeds
+        ``threshold`` (m/s), as ``SlipInterval(t_start, t_end, peak, wheels)`` (first and last sample
+        time, peak slip speed in m/s, wheel names); runs at most ``merge_gap`` s apart are merged."""
+        return _slip_intervals(self.t, self.slip_speed, threshold, merge_gap)
 
     @cached_property
     def odometry_pose(self) -> np.ndarray:
@@ -197,7 +238,7 @@ class SimulationResult:
         data.update({f"plan_{n}": self.pose_d[:, i] for i, n in enumerate(("X", "Y", "gamma"))})
         data.update({f"plan_alpha_{s}": self.trajectory.alpha[:, i] for i, s in enumerate("lr")})
         data.update({f"odometry_{n}": self.odometry_pose[:, i] for i, n in enumerate(("X", "Y", "gamma"))})
-        for key in ("feedforward", "torque_command", "torque_applied"):
+        for key in ("feedforward", "torque_command", "torque_applied", "torque_burst", "slip_speed"):
             data.update({f"{key}_{w}": getattr(self, key)[:, i] for i, w in enumerate(WHEELS)})
         return pd.DataFrame(data)
 
@@ -212,6 +253,8 @@ class SimulationResult:
         """
         rows = []
         pose = self.position[:, :3]
+        lim = math.inf if self.settings.plant.torque_limit is None else self.settings.plant.torque_limit
+        saturated = np.any(np.abs(self.torque_command) > lim, axis=1)
         for name, sl in self.trajectory.segment_slices():
             end = sl.stop - 1
             dv = self.velocity[sl] - self.q_dot_d[sl]
@@ -227,12 +270,13 @@ class SimulationResult:
                 "heading_error": float(abs(pose[end, 2] - self.pose_d[end, 2])),
                 "odometry_drift": float(np.hypot(*(self.odometry_pose[end, :2] - pose[end, :2]))),
                 "odometry_heading_drift": float(abs(self.odometry_pose[end, 2] - pose[end, 2])),
-                "saturated": float(np.mean(np.any(self.torque_applied[sl] != self.torque_command[sl], axis=1))),
+                "saturated": float(np.mean(saturated[sl])),
             })
         return pd.DataFrame(rows)
 
     def sidecar(self) -> dict[str, Any]:
-        """YAML sidecar of the log: platform, true parameters (eq. 18 order), seed, settings, summary."""
+        """YAML sidecar of the log: platform, true parameters (eq. 18 order), seed, settings, summary,
+        and the true slip intervals ``slip_truth`` (above ``slip_truth_threshold`` m/s)."""
         fs = floor_space(self.trajectory)
         return {
             "source": "agvdyn.simulation",
@@ -245,6 +289,9 @@ class SimulationResult:
             "plant": _plant_facts(self.geometry, self.plant_params, self.settings.plant),
             "floor_space": {"length": fs.length, "width": fs.width},
             "tracking": self.tracking().to_dict(orient="records"),
+            "slip_truth_threshold": SLIP_THRESHOLD,
+            "slip_truth_merge_gap": MERGE_GAP,
+            "slip_truth": [s.to_dict() for s in self.slip_intervals(SLIP_THRESHOLD)],
         }
 
     def write(self, path: str | os.PathLike) -> Path:
@@ -338,10 +385,14 @@ def simulate(
     mode_d = np.ascontiguousarray(traj.mode, dtype=np.int64)
     alpha_dot_d = np.ascontiguousarray(q_dot_d[:, 3:5])
     beta_dot_d = np.ascontiguousarray(q_dot_d[:, 5:])
+    t = np.ascontiguousarray(traj.t, dtype=float)
+    burst = settings.slip.burst_torques(t)
+    patches = settings.slip.patch_table()
     for k0 in range(0, n, CHUNK):
         k1 = min(n, k0 + CHUNK)
         run_chunk(k0, k1, c, g, Ts, settings.plant.substeps, wheel_res, steer_res,
                   u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, noise.steering, noise.torque, noise.torque_offset,
+                  t, burst, patches,
                   pos, vel, cstate, work,
                   out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
                   energy, out["work"])
@@ -353,7 +404,7 @@ def simulate(
     return SimulationResult(
         traj, platform, plant_params, ctrl_params, settings, seed,
         out["pos"], out["vel"], q_dot_d, beta_d, u_ff, out["alpha"], out["beta"],
-        out["cmd"], out["app"], out["meas"], energy, out["work"],
+        out["cmd"], out["app"], out["meas"], energy, out["work"], burst,
     )
 
 

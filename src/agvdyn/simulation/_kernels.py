@@ -160,11 +160,12 @@ def _cholesky_solve(K, rhs, n):
 
 
 @njit(cache=True)
-def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
+def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec, mu_w):
     """Advance the plant by one linearly-implicit Euler step of length dt (in place).
 
     ``torque``: motor torques (4,) after the drive's limit; ``work`` (3,) accumulates
-    (motor work, dissipated work, stop work) over the step, evaluated at the new velocities.
+    (motor work, dissipated work, stop work) over the step, evaluated at the new velocities;
+    ``mu_w`` (4,): factor on the friction coefficient of each wheel (1: the floor's mu).
     """
     alpha = pos[3:5]
     _mass_matrix(c, alpha, M)
@@ -176,8 +177,8 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec):
         for q in range(9):
             t += A[j, q] * vel[q]
         slip[j] = t
-    mufz = c[_MU] * c[_FZ]
     for i in range(4):
+        mufz = c[_MU] * mu_w[i] * c[_FZ]
         v_contact = slip[4 + i] + c[_RW + i] * vel[5 + i]
         V = max(abs(c[_RW + i] * vel[5 + i]), math.sqrt(v_contact**2 + slip[i] ** 2), c[_V0])
         d_lat, d_long = c[_CLAT] / V, c[_CLONG] / V
@@ -288,16 +289,74 @@ def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
     V[0] = vel
     E[0] = kinetic_energy(c, pos, vel, M)
     tq = np.zeros(4)
+    mu_w = np.ones(4)
     for k in range(n):
         for i in range(4):
             tq[i] = min(max(torques[k, i], -c[_TLIM]), c[_TLIM])
         for j in range(substeps):
-            plant_step(c, pos, vel, tq, dt, work, M, A, K, h, rhs, slip, dvec)
+            plant_step(c, pos, vel, tq, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
         P[k + 1] = pos
         V[k + 1] = vel
         E[k + 1] = kinetic_energy(c, pos, vel, M)
         W[k + 1] = work
     return P, V, E, W
+
+
+# --- slip scenario (see slip.py) ---
+
+@njit(cache=True)
+def _contact_point(c, pos, i):
+    """World position (X, Y) of the contact point of wheel i: steering axis plus a along the axle."""
+    side, s, h, cx, cy, th = _unit_geometry(c, pos[3:5], i)
+    px = cx - s * c[_A] * math.sin(th)
+    py = cy + s * c[_A] * math.cos(th)
+    cg, sg = math.cos(pos[2]), math.sin(pos[2])
+    return pos[0] + cg * px - sg * py, pos[1] + sg * px + cg * py
+
+
+@njit(cache=True)
+def patch_factors(c, pos, t, patches, mu_w):
+    """Factor on mu (4,) of each wheel at time t: the smallest ``mu_factor`` of the patches
+    (rows x_min, x_max, y_min, y_max, t_start, t_end, mu_factor) holding its contact point, else 1."""
+    for i in range(4):
+        mu_w[i] = 1.0
+    for p in range(patches.shape[0]):
+        if t < patches[p, 4] or t >= patches[p, 5]:
+            continue
+        for i in range(4):
+            x, y = _contact_point(c, pos, i)
+            if patches[p, 0] <= x < patches[p, 1] and patches[p, 2] <= y < patches[p, 3]:
+                mu_w[i] = min(mu_w[i], patches[p, 6])
+
+
+@njit(cache=True)
+def contact_points(c, positions):
+    """World positions (N, 4, 2) of the contact points of the plant positions (N, 9)."""
+    n = positions.shape[0]
+    out = np.zeros((n, 4, 2))
+    for k in range(n):
+        for i in range(4):
+            out[k, i, 0], out[k, i, 1] = _contact_point(c, positions[k], i)
+    return out
+
+
+@njit(cache=True)
+def slip_speeds(c, positions, velocities):
+    """Slip speed (N, 4), m/s, of each contact point: the norm of its lateral and longitudinal
+    slip velocity (rows i and 4 + i of A(alpha) v with the true rolling radii)."""
+    n = positions.shape[0]
+    out = np.zeros((n, 4))
+    A = np.zeros((8, 9))
+    for k in range(n):
+        constraint_matrix_into(c[_L], c[_B], c[_A], c[_RW:_RW + 4], positions[k, 3], positions[k, 4], A)
+        for i in range(4):
+            lat = 0.0
+            lon = 0.0
+            for q in range(9):
+                lat += A[i, q] * velocities[k, q]
+                lon += A[4 + i, q] * velocities[k, q]
+            out[k, i] = math.sqrt(lat * lat + lon * lon)
+    return out
 
 
 # --- sensors (see sensors.py) ---
@@ -393,9 +452,15 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
 @njit(cache=True)
 def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
               u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, steer_noise, torque_noise, torque_offset,
+              t, burst, patches,
               pos, vel, cstate, work,
               out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_energy, out_work):
-    """Simulate samples k0..k1-1 in place; ``pos``, ``vel``, ``cstate``, ``work`` carry the state."""
+    """Simulate samples k0..k1-1 in place; ``pos``, ``vel``, ``cstate``, ``work`` carry the state.
+
+    Slip scenario: ``burst`` (N, 4) motor torques added after the torque limit (the controller does
+    not know them, the torque sensors measure them); ``patches`` (P, 7) floor patches of reduced
+    mu (see :func:`patch_factors`) at the sample times ``t`` (N,) plus the substep offsets.
+    """
     M = np.zeros((9, 9))
     A = np.zeros((8, 9))
     K = np.zeros((9, 9))
@@ -407,13 +472,17 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
     beta_m = np.zeros(4)
     u = np.zeros(4)
     ua = np.zeros(4)
+    mu_w = np.ones(4)
     dt = Ts / substeps
     lim = c[_TLIM]
+    n_patches = patches.shape[0]
     for k in range(k0, k1):
         read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m)
         controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, cstate, u)
         for i in range(4):
             ua[i] = min(max(u[i], -lim), lim)
+            if burst[k, i] != 0.0:
+                ua[i] += burst[k, i]
         out_pos[k] = pos
         out_vel[k] = vel
         out_alpha[k] = alpha_m
@@ -425,4 +494,6 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
             out_app[k, i] = ua[i]
             out_meas[k, i] = ua[i] + torque_offset[i] + torque_noise[k, i]
         for j in range(substeps):
-            plant_step(c, pos, vel, ua, dt, work, M, A, K, h, rhs, slip, dvec)
+            if n_patches > 0:
+                patch_factors(c, pos, t[k] + j * dt, patches, mu_w)
+            plant_step(c, pos, vel, ua, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)

@@ -9,6 +9,7 @@ point): ``F = -mu F_z tanh(|sigma|) sigma / |sigma|`` with ``sigma = (C_lat s_la
 (V mu F_z)``, where ``C_*`` are slip stiffnesses (N per unit slip) and ``V = max(|r beta_dot|,
 |v_contact|, v_0)`` the rolling speed regularised at ``v_0`` (a linear damper near standstill).
 Steering is passive: only the longitudinal tyre forces acting at the offset ``a`` turn it.
+A slip scenario (slip.py) can lower ``mu`` per wheel where its contact point is on a floor patch.
 
 Mass matrix: with the neglected effects off, ``M = diag(m_ch, m_ch, C_ch + C_l + C_r, C_l, C_r, B_w I_4)``
 and the Coriolis terms of eq. (16), i.e. exactly the identification model's inertia. Switching
