@@ -121,3 +121,53 @@ def test_only_selected_segments_are_used(run):
     counts = log_rows(_log(frame, side), PROTOTYPE, IdentificationSettings(segments=("straight",))).counts
     assert set(counts.per_mode) == {"2s"}
     assert counts.not_selected > 0.6 * counts.samples
+
+
+@pytest.fixture(scope="module")
+def slip_run():
+    """The `--slip` scenario without its no-slip control burst (73 s): a low-friction strip, a slippery
+    time window and four torque bursts that make wheels slip, in straight and rotation."""
+    from dataclasses import replace
+
+    from agvdyn.simulation import SLIP_SCENARIO
+
+    bursts = tuple(b for b in SLIP_SCENARIO.bursts if abs(b.t - 73.0) > 0.01)
+    settings = replace(SimulationSettings(plant=PlantSettings().ideal()), slip=replace(SLIP_SCENARIO, bursts=bursts))
+    result = simulate("identification", settings=settings, seed=1)
+    return _log(result.log_frame(), result.sidecar()), result.sidecar()["slip_truth"]
+
+
+def test_slip_is_found_and_dropped(slip_run, reference):
+    log, truth = slip_run
+    ident = identify(log)
+    # every true slip interval is inside one reported event, and no event is without true slip
+    assert len(ident.slip_events) == len(truth) == 4
+    for event, true in zip(ident.slip_events, truth):
+        assert event.t_start <= true["t_start"] + 0.01 and event.t_end >= true["t_end"] - 0.03
+        assert set(true["wheels"]) <= set(event.wheels)
+    assert ident.rows.slip > sum(e.rows for e in ident.slip_events)  # guard rows too
+    for n in ("m_ch", "C_ch", "d_vw", "d_cw"):
+        got, want = getattr(ident.parameters, n), getattr(reference.parameters, n)
+        assert abs(got / want - 1) < 0.01, f"{n}: {got:.6g} against the slip-free twin's {want:.6g}"
+    # without slip detection the same log is off by more
+    blind = identify(log, settings=IdentificationSettings(slip_threshold=float("inf"), max_relative_std=float("inf")))
+    assert max(abs(getattr(blind.parameters, n) / getattr(reference.parameters, n) - 1) for n in ("m_ch", "d_vw")) > 0.01
+
+
+def test_cli_reports_slip_events(slip_run, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from agvdyn.cli import app
+    from agvdyn.io import write_log
+
+    log, _ = slip_run
+    path = write_log(tmp_path / "slip.parquet", log)
+    result = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "p.yaml"), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["slip_events"]) == 4 and data["dropped_slip_rows"] > 100
+    assert set(data["slip_events"][0]) >= {"t_start", "t_end", "peak_mps", "wheels"}
+    text = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "q.yaml")]).output
+    assert "wheel slip:" in text and "rows:" in text

@@ -29,6 +29,8 @@ class EquationBlock:
     keep : (n, n_k) rows used in the regression (stiction, slip, edges and guards dropped).
     offset_regressor : (n, n_k, 4) ``H_k^T B e_i``: generalized torques of a unit offset of each
         motor-torque measurement.
+    recording : name of the continuous recording the rows come from (residuals are correlated
+        within one, independent between two); ``sample`` (n,) the rows' sample index in it.
     """
 
     source: str
@@ -40,6 +42,14 @@ class EquationBlock:
     s_dot: np.ndarray
     keep: np.ndarray
     offset_regressor: np.ndarray
+    recording: str = ""
+    sample: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.sample is None:
+            object.__setattr__(self, "sample", np.arange(self.t.size))
+        if not self.recording:
+            object.__setattr__(self, "recording", f"{self.source}:{self.segment}")
 
     @property
     def coordinates(self) -> tuple[str, ...]:
@@ -56,7 +66,11 @@ class EquationBlock:
     def rows(self, sl: slice, segment: str) -> "EquationBlock":
         """The rows ``sl`` of this block under another segment name."""
         return EquationBlock(self.source, segment, self.mode, self.t[sl], self.regressor[sl], self.torque[sl],
-                             self.s_dot[sl], self.keep[sl], self.offset_regressor[sl])
+                             self.s_dot[sl], self.keep[sl], self.offset_regressor[sl], self.recording, self.sample[sl])
+
+    def with_keep(self, keep: np.ndarray) -> "EquationBlock":
+        return EquationBlock(self.source, self.segment, self.mode, self.t, self.regressor, self.torque, self.s_dot,
+                             keep, self.offset_regressor, self.recording, self.sample)
 
 
 def generalized_velocity(H: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
@@ -107,7 +121,8 @@ def equation_block(geometry: Geometry, mode: Mode | str, alpha: np.ndarray, q_do
 
 def projected_block(geometry: Geometry, mode: Mode, alpha: np.ndarray, q_dot: np.ndarray, signals: np.ndarray,
                     u: np.ndarray, *, t: np.ndarray, source: str, segment: str,
-                    stiction_threshold: float | Mapping[str, float], mode_tolerance: float) -> EquationBlock:
+                    stiction_threshold: float | Mapping[str, float], mode_tolerance: float,
+                    recording: str, sample: np.ndarray) -> EquationBlock:
     """Rows of eq. (19) from the (filtered) entries of Theta and torques of consecutive samples in mode k."""
     H = kinematic_model(geometry, mode, alpha, tolerance=mode_tolerance)
     n = alpha.shape[0]
@@ -115,4 +130,5 @@ def projected_block(geometry: Geometry, mode: Mode, alpha: np.ndarray, q_dot: np
     tau = geometry.i_G * np.einsum("nik,ni->nk", H[:, 5:, :], u)
     s_dot = generalized_velocity(H, q_dot)
     keep = stiction_mask(s_dot, _thresholds(mode, stiction_threshold))
-    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep, _offset_columns(geometry, H, n))
+    return EquationBlock(source, segment, mode, t, Y, tau, s_dot, keep, _offset_columns(geometry, H, n),
+                         recording, sample)

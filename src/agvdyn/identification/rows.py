@@ -144,7 +144,7 @@ def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndar
 
 
 def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: _Labels | None,
-                    settings: IdentificationSettings) -> list[EquationBlock]:
+                    settings: IdentificationSettings, recording: str) -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there)."""
     guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
@@ -157,10 +157,9 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: n
         m = Mode(int(mode[a]))
         block = projected_block(geometry, m, st.alpha[a:b], q_dot[a:b], st.signals[a:b], st.torque[a:b],
                                 t=st.t[a:b], source=st.source, segment=f"mode {m.label}",
-                                stiction_threshold=thresholds, mode_tolerance=settings.mode_tolerance)
-        keep = guarded_mask(block.keep & usable[a:b, None], guard)
-        block = EquationBlock(block.source, block.segment, m, block.t, block.regressor, block.torque, block.s_dot,
-                              keep, block.offset_regressor)
+                                stiction_threshold=thresholds, mode_tolerance=settings.mode_tolerance,
+                                recording=recording, sample=np.arange(st.rows.start + a, st.rows.start + b))
+        block = block.with_keep(guarded_mask(block.keep & usable[a:b, None], guard))
         if labels is None:
             blocks.append(block)
             continue
@@ -195,7 +194,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     threshold = slip_threshold(speeds, settings)
     slip_guard = settings.slip_guard
     blocks, events = [], []
-    for st, mode in in_mode:
+    for k, (st, mode) in enumerate(in_mode):
         drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
         events += ev
         if settings.segments is None:
@@ -217,7 +216,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & (mode == m)))
         if labels is not None:
             _count_mismatch(counts, labels, st.rows, mode)
-        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings)
+        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings, f"{source}#{k}")
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
 
 
