@@ -225,7 +225,7 @@ def test_motor_torque_offsets_are_estimated(model_data):
     assert ident.offset_vector == pytest.approx(offsets, abs=1e-6)
     assert set(ident.offsets_std) == {"offset_fl", "offset_rl", "offset_fr", "offset_rr"}
     assert 1.0 < ident.condition_number < ident.condition_number_with_offsets
-    plain = identify(log, PROTOTYPE, settings=IdentificationSettings(torque_offsets=False))
+    plain = identify(log, PROTOTYPE, settings=IdentificationSettings(torque_offsets=False, uncertainty="classic"))
     assert _rel_error(plain).max() > 1e-2
     assert plain.offsets == {} and plain.offset_vector is None
 

@@ -79,7 +79,11 @@ def test_cli_identify_json_keys_and_file(logs):
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert set(data["parameters"]) == set(PARAMETER_NAMES)
-    assert set(data["parameters"]["C_l"]) == {"value", "std"}
+    assert set(data["parameters"]["C_l"]) == {"value", "std", "ci95", "std_classic"}
+    low, high = data["parameters"]["C_l"]["ci95"]
+    assert low < data["parameters"]["C_l"]["value"] < high
+    assert data["uncertainty"]["method"] == "hac" and data["uncertainty"]["bandwidth_steps"] >= 50
+    assert data["correlation"]["names"][0] == "C_l" and data["correlation"]["matrix"][0][0] == 1.0
     assert data["parameters"]["B_w"] == {"value": 0.121, "std": None}
     assert data["condition_number"] > 1
     assert read_parameters(out).parameters.C_ch == pytest.approx(data["parameters"]["C_ch"]["value"])

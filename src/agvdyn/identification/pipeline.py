@@ -16,13 +16,13 @@ from agvdyn.identification.plausibility import ImplausibleError, diagnose_signs,
 from agvdyn.identification.regression import (
     Dependency,
     Estimator,
-    LeastSquares,
     UnidentifiableError,
     column_norms,
     dependent_parameters,
-    stacked_system,
+    stacked_rows,
     variance_inflation,
 )
+from agvdyn.identification.uncertainty import parameter_uncertainty
 from agvdyn.identification.result import Identification
 from agvdyn.identification.rows import RowCounts, log_rows
 from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
@@ -101,7 +101,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     fixed = _check_fixed(fixed)
     blocks = tuple(blocks)
     with_offsets = settings.torque_offsets
-    A, y = stacked_system(blocks, offsets=with_offsets)
+    A, y, index = stacked_rows(blocks, offsets=with_offsets)
     names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else [])
     free = [n for n in names if n not in fixed]
     idx_free = [names.index(n) for n in free]
@@ -123,7 +123,12 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     if collinear:
         raise UnidentifiableError(collinear, f"poorly conditioned data (variance inflation above "
                                              f"{settings.max_inflation:g}): ")
-    est = (estimator if estimator is not None else LeastSquares()).fit(A1, y1)
+    est = (estimator if estimator is not None else settings.make_estimator()).fit(A1, y1, groups=index.group,
+                                                                               names=free)
+    unc = parameter_uncertainty(settings.uncertainty, est, A1, y1, index, bandwidth=settings.bandwidth,
+                                bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
+                                replicates=settings.bootstrap_replicates, seed=settings.seed)
+    sd_all = unc.std
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
     # columns are reported separately
     param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]
@@ -142,8 +147,10 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     theta[idx_free] = est.coef_
     p = theta[:N_P]
     offsets = theta[N_P:] if with_offsets else None
-    all_std = dict(zip(free, est.std_.tolist()))
+    all_std = dict(zip(free, sd_all.tolist()))
     std = {n: v for n, v in all_std.items() if n in PARAMETER_NAMES}
+    std_classic = {n: float(v) for n, v in zip(free, est.std_) if n in PARAMETER_NAMES}
+    correlation = _correlation(unc.cov, free)
     residual_rms = _residual_rms(blocks, p, offsets)
     warnings: list[str] = []
     if settings.plausibility:
@@ -152,7 +159,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
         if refused:
             raise ImplausibleError(refused, None, "")
     noisy = [Dependency(n, (), math.nan, relative_std=float(sd / abs(v)))
-             for n, v, sd in zip(free, est.coef_, est.std_)
+             for n, v, sd in zip(free, est.coef_, sd_all)
              if n in PARAMETER_NAMES and sd > settings.max_relative_std * abs(v)]
     if noisy:
         raise UnidentifiableError(noisy, f"weakly excited data (standard deviation above "
@@ -164,11 +171,27 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
         residual_rms=residual_rms, n_rows=int(A.shape[0]),
         n_samples=int(n_samples if n_samples is not None else sum(b.t.size for b in blocks)),
         blocks=blocks, settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
-        estimator=type(est).__name__,
+        estimator=getattr(est, "name", "") or type(est).__name__,
+        std_classic=std_classic, correlation=correlation,
+        uncertainty={"method": unc.method.value, **unc.details},
+        active_bounds=tuple(getattr(est, "active_", ())),
+        downweighted_rows=int(np.count_nonzero(getattr(est, "downweighted_", []))),
         offsets={} if offsets is None else dict(zip(OFFSET_NAMES, offsets.tolist())),
         offsets_std={n: all_std[n] for n in OFFSET_NAMES if n in all_std},
         rows=rows if rows is not None else RowCounts(), slip_events=tuple(slip_events),
         slip_thresholds=dict(slip_thresholds or {}), warnings=tuple(warnings))
+
+
+def _correlation(cov: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
+    """Correlation matrix of the estimated parameters (offsets left out)."""
+    keep = [i for i, n in enumerate(names) if n in PARAMETER_NAMES]
+    c = cov[np.ix_(keep, keep)]
+    d = np.sqrt(np.maximum(np.diag(c), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = c / np.outer(d, d)
+    r[~np.isfinite(r)] = 0.0
+    np.fill_diagonal(r, 1.0)
+    return {"names": [names[i] for i in keep], "matrix": r.round(6).tolist()}
 
 
 def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,

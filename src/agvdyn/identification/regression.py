@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -12,10 +11,12 @@ import scipy.linalg
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import base_parameters_of, triangular_factor
 from agvdyn.identification.equations import EquationBlock
+from agvdyn.identification.estimators import Estimator, LeastSquares, column_norms
 from agvdyn.identification.settings import EXCITATION, OFFSET_NAMES
+from agvdyn.identification.uncertainty import RowIndex
 
-__all__ = ["stacked_system", "Dependency", "UnidentifiableError", "dependent_parameters", "variance_inflation",
-           "column_norms", "Estimator", "LeastSquares"]
+__all__ = ["stacked_system", "stacked_rows", "Dependency", "UnidentifiableError", "dependent_parameters",
+           "variance_inflation", "column_norms", "Estimator", "LeastSquares"]
 
 #: Order in which the rank check accepts columns: the representative the paper names for each
 #: group of parameters that multiply the same signal comes first (Table 1: C_ch in rotation,
@@ -40,6 +41,25 @@ def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True, o
     A = [columns(b)[b.keep.ravel()] if kept_only else columns(b) for b in blocks]
     y = [b.torque.ravel()[b.keep.ravel()] if kept_only else b.torque.ravel() for b in blocks]
     return np.concatenate(A), np.concatenate(y)
+
+
+def stacked_rows(blocks: Sequence[EquationBlock], *, offsets: bool = False) -> tuple[np.ndarray, np.ndarray, RowIndex]:
+    """The kept rows of eq. (22) as :func:`stacked_system`, with where each row comes from."""
+    A, y = stacked_system(blocks, offsets=offsets)
+    names: dict[str, int] = {}
+    recordings: dict[str, int] = {}
+    group, recording, step = [], [], []
+    for b in blocks:
+        keep = b.keep
+        codes = np.array([names.setdefault(c, len(names)) for c in b.coordinates])
+        rec = recordings.setdefault(b.recording, len(recordings))
+        group.append(np.broadcast_to(codes, keep.shape)[keep])
+        recording.append(np.full(int(keep.sum()), rec))
+        step.append(np.broadcast_to(b.sample[:, None], keep.shape)[keep])
+    index = RowIndex(np.concatenate(group).astype(np.int64) if group else np.zeros(0, np.int64), tuple(names),
+                     np.concatenate(recording).astype(np.int64) if recording else np.zeros(0, np.int64),
+                     np.concatenate(step).astype(np.int64) if step else np.zeros(0, np.int64))
+    return A, y, index
 
 
 @dataclass(frozen=True)
@@ -83,11 +103,6 @@ class UnidentifiableError(ValueError):
         super().__init__(f"{context}parameters {names} cannot be identified from these data:\n  {lines}\n{advice}")
 
 
-def column_norms(A: np.ndarray) -> np.ndarray:
-    """Euclidean norms of the columns of A (the diagonal of W^-1 in eq. 25)."""
-    return np.sqrt(np.einsum("ij,ij->j", A, A))
-
-
 def dependent_parameters(A: np.ndarray, names: Sequence[str], *, tolerance: float = 1e-6) -> list[Dependency]:
     """Parameters whose columns of the stacked regressor are not linearly independent (sec. 6.1).
 
@@ -110,71 +125,3 @@ def variance_inflation(A: np.ndarray) -> np.ndarray:
     R = triangular_factor(A / column_norms(A))
     R_inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]))
     return np.einsum("ij,ij->i", R_inv, R_inv)
-
-
-class Estimator(ABC):
-    """Interface of the estimators (scikit-learn style): settings in ``__init__``, ``fit`` returns
-    self, fitted results end in ``_``.
-
-    ``fit(A, y)`` takes the stacked regressor of the free parameters and the right-hand side of
-    eq. (24) and sets ``coef_`` (values), ``cov_`` (covariance), ``condition_number_``.
-    """
-
-    coef_: np.ndarray
-    cov_: np.ndarray
-    condition_number_: float
-
-    @abstractmethod
-    def fit(self, A: np.ndarray, y: np.ndarray) -> "Estimator":
-        ...
-
-    @property
-    def std_(self) -> np.ndarray:
-        self._check_fitted()
-        return np.sqrt(np.diag(self.cov_))
-
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "coef_"):
-            raise RuntimeError(f"{type(self).__name__} is not fitted: call fit(A, y) first")
-
-
-class LeastSquares(Estimator):
-    """Least squares with column scaling, eq. (25).
-
-    ``Theta_1,w = Theta_1 W`` with ``W = diag(1 / ||theta_1,i||)`` (unit-norm columns; the extracted
-    text says W "contains the norms", the reciprocal is the reading that improves the
-    conditioning), ``p_1 = W Theta_1,w^+ (tau - Theta_2 p_2)`` by ``scipy.linalg.lstsq``.
-    Covariance ``sigma^2 W (Theta_1,w^T Theta_1,w)^-1 W`` with ``sigma^2 = |r|^2 / (m - n)``.
-    ``condition_number_`` is ``cond(Theta_1,w^T Theta_1,w)`` (the quantity the paper reports, 11.56),
-    ``condition_number_unscaled_`` the same of the unscaled ``Theta_1``.
-    """
-
-    def fit(self, A: np.ndarray, y: np.ndarray) -> "LeastSquares":
-        A = np.asarray(A, dtype=float)
-        y = np.asarray(y, dtype=float)
-        m, n = A.shape
-        if m <= n:
-            raise ValueError(f"least squares with {m} rows for {n} parameters: expected more rows than parameters")
-        norms = column_norms(A)
-        if np.any(norms == 0):
-            raise ValueError(f"columns {np.flatnonzero(norms == 0).tolist()} of the regressor are zero")
-        # QR of [Theta_1,w | tau]: R_aug = [[R, Q^T tau], [0, |r|]] gives the solution, the residual
-        # norm and (Theta_1,w^T Theta_1,w)^-1 = R^-1 R^-T without forming the normal equations.
-        R_aug = triangular_factor(np.column_stack([A / norms, y]))
-        R, qty, res_norm = R_aug[:n, :n], R_aug[:n, n], abs(R_aug[n, n])
-        pw = scipy.linalg.solve_triangular(R, qty)
-        R_inv = scipy.linalg.solve_triangular(R, np.eye(n))
-        sigma2 = res_norm**2 / (m - n)
-        sv = np.linalg.svd(R, compute_uv=False)
-        self.scale_ = 1.0 / norms
-        self.coef_ = pw / norms
-        self.cov_ = sigma2 * (R_inv @ R_inv.T) / np.outer(norms, norms)
-        self.sigma2_ = sigma2
-        self.residual_norm_ = res_norm
-        self.condition_number_ = float((sv[0] / sv[-1]) ** 2)
-        sv_raw = np.linalg.svd(R * norms, compute_uv=False)  # R W^-1 is a triangular factor of Theta_1
-        self.condition_number_unscaled_ = float((sv_raw[0] / sv_raw[-1]) ** 2)
-        self.n_rows_ = m
-        return self
-
-

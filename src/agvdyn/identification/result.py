@@ -61,6 +61,28 @@ class Identification:
     slip_events: tuple[SlipEvent, ...] = ()
     slip_thresholds: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    std_classic: dict[str, float] = field(default_factory=dict)
+    correlation: dict[str, Any] = field(default_factory=dict)
+    uncertainty: dict[str, Any] = field(default_factory=dict)
+    active_bounds: tuple[str, ...] = ()
+    downweighted_rows: int = 0
+
+    def ci95(self, name: str) -> tuple[float, float] | None:
+        """95 % interval ``value +- 1.96 std`` of an estimated parameter, None for a fixed one."""
+        if name not in self.std:
+            return None
+        v, s = getattr(self.parameters, name), self.std[name]
+        return (v - 1.959964 * s, v + 1.959964 * s)
+
+    def _parameter_entries(self) -> dict[str, dict[str, Any]]:
+        out = {}
+        for n in PARAMETER_NAMES:
+            entry: dict[str, Any] = {"value": getattr(self.parameters, n), "std": self.std.get(n)}
+            if n in self.std:
+                entry["ci95"] = list(self.ci95(n))
+                entry["std_classic"] = self.std_classic.get(n)
+            out[n] = entry
+        return out
 
     @property
     def offset_vector(self) -> np.ndarray | None:
@@ -96,7 +118,6 @@ class Identification:
             "residual_rms": dict(self.residual_rms),
             "n_rows": self.n_rows,
             "n_samples": self.n_samples,
-            "estimator": self.estimator,
             "settings": self.settings.to_dict(),
             "sources": list(self.sources),
             "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
@@ -107,6 +128,11 @@ class Identification:
 
     def _data_account(self) -> dict[str, Any]:
         return {
+            "estimator": self.estimator,
+            "uncertainty": dict(self.uncertainty),
+            "correlation": dict(self.correlation),
+            "active_bounds": list(self.active_bounds),
+            "downweighted_rows": self.downweighted_rows,
             "rows": self.rows.to_dict(),
             "slip_events": [e.to_dict() for e in self.slip_events],
             "dropped_slip_rows": self.rows.slip,
@@ -120,7 +146,7 @@ class Identification:
     def to_json_dict(self) -> dict[str, Any]:
         """The summary printed by ``agvdyn identify --json``."""
         return {
-            "parameters": {n: {"value": getattr(self.parameters, n), "std": self.std.get(n)} for n in PARAMETER_NAMES},
+            "parameters": self._parameter_entries(),
             "condition_number": self.condition_number,
             "condition_number_unscaled": self.condition_number_unscaled,
             "condition_number_with_offsets": (None if not math.isfinite(self.condition_number_with_offsets)

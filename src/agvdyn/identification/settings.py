@@ -109,6 +109,18 @@ class IdentificationSettings:
     max_inflation, max_relative_std : quality limits (variance inflation of the unit-norm
         columns; std as a fraction of the value); ``inf`` switches a check off.
     plausibility : refuse negative masses, inertias and frictions, naming the likely cause.
+
+    Estimator and uncertainty
+    -------------------------
+    estimator : ``ols``, ``wls``, ``robust`` or ``bounded`` (:mod:`agvdyn.identification.estimators`).
+    robust_loss : ``tukey`` or ``huber`` (estimator ``robust``).
+    bounds : extra bounds ``((name, low, high), ...)`` of the estimator ``bounded``.
+    uncertainty : ``classic`` (eq. 25), ``hac`` or ``bootstrap``
+        (:mod:`agvdyn.identification.uncertainty`).
+    bandwidth : HAC bandwidth / bootstrap block length in samples; None: from the data,
+        ``bandwidth_factor`` times the residual scores' integrated correlation time, at least
+        ``min_bandwidth``.
+    bootstrap_replicates, seed : replicates and seed of the bootstrap.
     """
 
     filter: FilterSettings = FilterSettings()
@@ -135,8 +147,32 @@ class IdentificationSettings:
     max_inflation: float = 100.0
     max_relative_std: float = 0.5
     plausibility: bool = True
+    estimator: str = "wls"
+    robust_loss: str = "tukey"
+    bounds: tuple[tuple[str, float, float], ...] = ()
+    uncertainty: str = "hac"
+    bandwidth: int | None = None
+    bandwidth_factor: float = 2.0
+    min_bandwidth: int = 50
+    bootstrap_replicates: int = 200
+    seed: int = 0
 
     def __post_init__(self) -> None:
+        from agvdyn.identification.estimators import ESTIMATORS
+        from agvdyn.identification.uncertainty import UncertaintyMethod
+
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator {self.estimator!r}: expected one of {sorted(ESTIMATORS)}")
+        if self.robust_loss not in ("tukey", "huber"):
+            raise ValueError(f"robust loss {self.robust_loss!r}: expected 'tukey' or 'huber'")
+        methods = [m.value for m in UncertaintyMethod]
+        if self.uncertainty not in methods:
+            raise ValueError(f"uncertainty {self.uncertainty!r}: expected one of {methods}")
+        if self.bandwidth is not None and not (isinstance(self.bandwidth, int) and self.bandwidth >= 1):
+            raise ValueError(f"bandwidth={self.bandwidth}: expected an integer >= 1 (samples) or None")
+        if not (isinstance(self.bootstrap_replicates, int) and self.bootstrap_replicates >= 20):
+            raise ValueError(f"bootstrap_replicates={self.bootstrap_replicates}: expected an integer >= 20")
+        object.__setattr__(self, "bounds", tuple((str(n), float(lo), float(hi)) for n, lo, hi in self.bounds))
         object.__setattr__(self, "filtering", Filtering(self.filtering))
         for key in _NON_NEGATIVE:
             value = getattr(self, key)
@@ -184,5 +220,18 @@ class IdentificationSettings:
             "plausibility": self.plausibility,
         }
         out.update({k: getattr(self, k) for k in _NON_NEGATIVE})
-        out.update(max_inflation=self.max_inflation, max_relative_std=self.max_relative_std)
+        out.update(max_inflation=self.max_inflation, max_relative_std=self.max_relative_std,
+                   estimator=self.estimator, robust_loss=self.robust_loss, bounds=[list(b) for b in self.bounds],
+                   uncertainty=self.uncertainty, bandwidth=self.bandwidth, bandwidth_factor=self.bandwidth_factor,
+                   min_bandwidth=self.min_bandwidth, bootstrap_replicates=self.bootstrap_replicates, seed=self.seed)
         return out
+
+    def make_estimator(self):
+        """The estimator these settings name."""
+        from agvdyn.identification.estimators import Bounded, Robust, make_estimator
+
+        if self.estimator == "robust":
+            return Robust(loss=self.robust_loss)  # type: ignore[arg-type]
+        if self.estimator == "bounded":
+            return Bounded({n: (lo, hi) for n, lo, hi in self.bounds})
+        return make_estimator(self.estimator)
