@@ -64,7 +64,7 @@ def main() -> None:
             bag = write_bag(log, tmp / f"bag_{storage}", mapping, storage, platform=PROTOTYPE)
             w = time.perf_counter() - t0
             t0 = time.perf_counter()
-            back = load_log(bag, mapping)
+            back = load_log(bag, mapping, PROTOTYPE)  # the mapping's torques are wheel side: i_G needed
             r = time.perf_counter() - t0
             err = np.abs(back.alpha - log.alpha).max()
             print(f"bag {storage:7s}: {m} JointState messages (8 joints): write {m / w:,.0f} msg/s, "

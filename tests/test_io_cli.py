@@ -58,12 +58,14 @@ def test_convert_bag_then_inspect(tmp_path):
     log = Log.from_frame(mode_log())
     bag = write_bag(log, tmp_path / "bag", read_mapping(mapping), "mcap", platform=PROTOTYPE)
     out = tmp_path / "run.parquet"
-    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(mapping), "--out", str(out)])
+    write_platform(tmp_path / "proto.yaml", PROTOTYPE)
+    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(mapping), "--out", str(out), "--platform", str(tmp_path / "proto.yaml")])
     assert result.exit_code == 0, result.output
-    assert "resampled at 500 Hz" in result.output
+    assert "resampled at 500 Hz" in result.output and "i_G = 25" in result.output
     back = read_log(out)
     np.testing.assert_allclose(back.alpha, log.alpha, atol=1e-12)
     assert back.sidecar["conversion"]["input"] == "ros2_bag"
+    assert back.sidecar["conversion"]["i_G"] == PROTOTYPE.i_G
     assert back.sidecar["platform"]["i_G"] == PROTOTYPE.i_G
     result = runner.invoke(app, ["inspect", str(bag), "--mapping", str(mapping), "--json"])
     assert result.exit_code == 0, result.output
@@ -124,3 +126,50 @@ def test_short_mode_runs_are_merged_only_in_the_listing(tmp_path):
     assert merged["detected_runs"] == 7
     assert merged["mode_time"] == raw["mode_time"]  # totals from the detection, not the merged list
     assert raw["mode_time"]["1"] == pytest.approx(merged["modes"][1]["duration"] + 0.002 + 3 * 0.002, abs=1e-9)
+
+
+def test_convert_needs_a_gear_ratio_and_says_how_to_give_it(tmp_path):
+    mapping = MAPPINGS / "ros2_control.yaml"  # wheel-side torques
+    bag = write_bag(Log.from_frame(mode_log()), tmp_path / "bag", read_mapping(mapping), "mcap", platform=PROTOTYPE)
+    out = tmp_path / "run.parquet"
+    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(mapping), "--out", str(out)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "m_fl ('front_left_wheel_joint', side: wheel)" in result.output
+    assert "--platform FILE" in result.output and "i_G: <ratio>" in result.output
+    assert not out.exists()
+    # i_G in the mapping: no platform needed; recorded in the sidecar, no platform invented.
+    with_ratio = tmp_path / "with_ratio.yaml"
+    with_ratio.write_text(mapping.read_text() + "i_G: 25\n")
+    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(with_ratio), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "gear ratio i_G = 25 (from the mapping)" in result.output
+    back = read_log(out)
+    assert back.sidecar["conversion"]["i_G"] == 25 and "platform" not in back.sidecar
+    # Both, disagreeing: an error naming both values.
+    write_platform(tmp_path / "ten.yaml", Geometry(l=1.2, b=0.8, a=0.05, r=0.1, i_G=10.0, name="ten"))
+    result = runner.invoke(app, ["convert", str(bag), "--mapping", str(with_ratio), "--out", str(tmp_path / "x.parquet"),
+                                 "--platform", str(tmp_path / "ten.yaml")])
+    assert result.exit_code == 2 and "i_G: 25 but the platform ten has i_G = 10" in result.output
+    # Our own schema needs no gear ratio.
+    ours = write_log(tmp_path / "ours.csv", mode_log())
+    result = runner.invoke(app, ["convert", str(ours), "--out", str(tmp_path / "ours.parquet")])
+    assert result.exit_code == 0, result.output
+
+
+def test_convert_clips_within_the_stop_tolerance_and_reports_gaps(tmp_path):
+    frame = mode_log()
+    frame.loc[[10, 11], "alpha_l"] = np.pi / 2 + 0.004
+    frame.loc[1000:, "t"] += 0.1  # a dropout
+    path = write_log(tmp_path / "raw.csv", frame)
+    before = path.read_bytes()
+    out = tmp_path / "clean.parquet"
+    result = runner.invoke(app, ["convert", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert path.read_bytes() == before
+    assert "clipped to the steering stops" in result.output and "2 rows of alpha_l" in result.output
+    assert "1 time gap(s)" in result.output and "2 continuous stretches" in result.output
+    back = read_log(out)
+    assert back.sidecar["clipped_to_stops"] == {"alpha_l": 2, "alpha_r": 0}
+    assert back.alpha[:, 0].max() == np.pi / 2 and len(back.stretches()) == 2
+    result = runner.invoke(app, ["convert", str(path), "--out", str(tmp_path / "y.parquet"), "--stop-tolerance", "0.001"])
+    assert result.exit_code == 2 and "stop tolerance 0.001 rad" in result.output and "--stop-tolerance" in result.output

@@ -1,6 +1,7 @@
 """Our log schema: round trips and one test per kind of bad input."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -9,7 +10,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agvdyn.io import LOG_COLUMNS, SEGMENTS, Log, LogError, check_frame, read_log, sidecar_path, write_log
+from agvdyn.io import (
+    LOG_COLUMNS,
+    SEGMENTS,
+    STRETCH_GAP_SAMPLES,
+    Log,
+    LogError,
+    check_frame,
+    read_log,
+    sidecar_path,
+    write_log,
+)
 
 
 def make_frame(n: int = 200, dt: float = 0.002, segments: bool = True) -> pd.DataFrame:
@@ -131,22 +142,61 @@ def test_decreasing_time(tmp_path):
         read_log(write_csv(tmp_path, frame))
 
 
-def test_gap_longer_than_allowed(tmp_path):
+def test_gap_longer_than_allowed_when_limited(tmp_path):
+    """Gaps are read by default; a caller that sets max_gap_samples still gets them refused."""
     frame = make_frame()
     frame.loc[120:, "t"] += 0.002 * 5  # a gap of 6 sample periods
     path = write_csv(tmp_path, frame)
-    with pytest.raises(LogError, match=r"column 't', row 120 .*gap of 0\.012 s \(6\.0 sample periods\)"):
-        read_log(path)
+    assert read_log(path).n_samples == 200
+    with pytest.raises(LogError, match=r"column 't', row 120 .*gap of 0\.012 s \(6\.0 sample periods\) from t = 0\.238 s to t = 0\.25 s"):
+        read_log(path, max_gap_samples=5)
     assert read_log(path, max_gap_samples=6.5).n_samples == 200
 
 
-def test_steering_beyond_range(tmp_path):
+def test_steering_beyond_the_stop_tolerance(tmp_path):
     frame = make_frame()
-    frame.loc[70, "alpha_r"] = math.pi / 2 + 1e-3
-    with pytest.raises(LogError, match=r"column 'alpha_r', row 70 .*beyond the mechanical range"):
+    frame.loc[70, "alpha_r"] = math.pi / 2 + 0.0224
+    path = write_csv(tmp_path, frame)
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    text = str(err.value)
+    assert "bad.csv: column 'alpha_r', row 70 (line 72 of the file) (t = 0.14 s): steering angle 1.5932 rad" in text
+    assert "beyond the mechanical stop +1.5708 rad (pi/2) by 0.0224 rad" in text
+    assert "stop tolerance 0.01 rad" in text and "stop_tolerance=" in text and "--stop-tolerance" in text
+    assert "np.float64" not in text
+    log = read_log(path, stop_tolerance=0.03)  # raised: clipped instead
+    assert log.clipped == {"alpha_l": 0, "alpha_r": 1} and log.alpha[70, 1] == math.pi / 2
+    frame.loc[70, "alpha_r"] = -math.pi / 2 - 0.02
+    with pytest.raises(LogError, match=r"row 70 .*steering angle -1\.5908 rad is beyond the mechanical stop -1\.5708 rad \(pi/2\) by 0\.02 rad"):
         read_log(write_csv(tmp_path, frame))
-    frame.loc[70, "alpha_r"] = math.pi / 2 + 1e-7  # within the tolerance
-    read_log(write_csv(tmp_path, frame))
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_steering_within_the_stop_tolerance_is_clipped_and_counted(tmp_path, suffix):
+    frame = make_frame()
+    over = {"alpha_l": [(10, math.pi / 2 + 0.004), (11, math.pi / 2 + 0.01)], "alpha_r": [(50, -math.pi / 2 - 0.003)]}
+    for col, rows in over.items():
+        for row, value in rows:
+            frame.loc[row, col] = value
+    frame.loc[12, "alpha_l"] = math.pi / 2  # at the stop: not clipped
+    path = write_log(tmp_path / f"run{suffix}", frame)  # written as measured, not clipped
+    written = write_log(tmp_path / f"copy{suffix}", frame)
+    before = path.read_bytes()
+    log = read_log(path)
+    assert path.read_bytes() == before  # the input file is never modified
+    assert log.clipped == {"alpha_l": 2, "alpha_r": 1}
+    assert log.alpha[10, 0] == math.pi / 2 and log.alpha[11, 0] == math.pi / 2 and log.alpha[50, 1] == -math.pi / 2
+    assert np.abs(log.alpha).max() == math.pi / 2
+    others = np.ones(len(frame), dtype=bool)
+    others[[10, 11, 50]] = False
+    np.testing.assert_array_equal(log.alpha[others], frame[["alpha_l", "alpha_r"]].to_numpy()[others])
+    assert read_log(written).clipped == {"alpha_l": 2, "alpha_r": 1}
+    # In memory alike; the input frame keeps its values; a log without clipping counts zeros.
+    mem = Log.from_frame(frame)
+    assert mem.clipped == {"alpha_l": 2, "alpha_r": 1} and frame.loc[10, "alpha_l"] == math.pi / 2 + 0.004
+    assert dataclasses.replace(mem, sidecar={"x": 1}).clipped == mem.clipped  # a field: it survives copies
+    assert Log.from_frame(make_frame()).clipped == {"alpha_l": 0, "alpha_r": 0}
+    assert check_frame(frame)["alpha_l"].max() == math.pi / 2
 
 
 def test_steering_in_degrees_is_caught(tmp_path):
@@ -188,7 +238,7 @@ def test_check_frame_does_not_modify_its_input():
 @settings(max_examples=25, deadline=None)
 @given(
     n=st.integers(2, 50),
-    dt=st.floats(1e-4, 0.1),
+    dt=st.floats(1e-4, 0.07),
     angles=st.lists(st.floats(-math.pi / 2, math.pi / 2), min_size=2, max_size=2),
 )
 def test_from_frame_accepts_any_valid_uniform_log(n, dt, angles):
@@ -217,3 +267,60 @@ def test_unknown_segment_in_a_categorical_parquet_column(tmp_path):
 def read_log_from(frame, tmp_path):
     frame.to_parquet(tmp_path / "ok.parquet")
     return read_log(tmp_path / "ok.parquet")
+
+
+# --- real logs: dropouts, time in milliseconds, number formatting ---------------------------
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_log_with_a_dropout_is_read_and_split_into_stretches(tmp_path, suffix):
+    frame = make_frame(n=1000)
+    frame.loc[600:, "t"] += 0.1  # 0.1 s missing at 500 Hz
+    path = write_log(tmp_path / f"drop{suffix}", frame)
+    log = read_log(path)
+    assert log.n_samples == 1000 and log.sample_time == pytest.approx(0.002)
+    assert STRETCH_GAP_SAMPLES == 3.0
+    assert log.stretches() == (slice(0, 600), slice(600, 1000))
+    (gap,) = log.gaps()
+    assert gap == pytest.approx((599 * 0.002, 600 * 0.002 + 0.1))
+    # A step of 3 nominal steps is still continuous; a longer one is a cut; the threshold is settable.
+    frame = make_frame(n=100)
+    frame.loc[30:, "t"] += 2 * 0.002  # a step of 3 periods
+    frame.loc[70:, "t"] += 3 * 0.002  # a step of 4 periods
+    log = Log.from_frame(frame)
+    assert log.stretches() == (slice(0, 70), slice(70, 100))
+    assert log.stretches(2.5) == (slice(0, 30), slice(30, 70), slice(70, 100))
+    assert log.stretches(5) == (slice(0, 100),) and log.gaps(5) == ()
+    with pytest.raises(ValueError, match="max_step_samples"):
+        log.stretches(0.5)
+
+
+def test_non_increasing_time_stays_an_error_with_plain_numbers(tmp_path):
+    frame = make_frame()
+    frame.loc[60, "t"] = frame.loc[59, "t"] - 0.001
+    with pytest.raises(LogError) as err:
+        read_log(write_csv(tmp_path, frame))
+    assert "decreasing time t = 0.117 after t = 0.118" in str(err.value)
+    assert "np.float64" not in str(err.value)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_time_in_milliseconds_is_named(tmp_path, suffix):
+    frame = make_frame()
+    frame["t"] = frame["t"] * 1e3  # 0, 2, 4, ... ms
+    path = tmp_path / f"ms{suffix}"
+    frame.to_csv(path, index=False) if suffix == ".csv" else frame.to_parquet(path)
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    text = str(err.value)
+    assert f"ms{suffix}: column 't'" in text
+    assert "looks like it is in milliseconds" in text and "median time step 2 " in text
+    assert "convert 't' to seconds" in text and "time: {column: t, unit: ms}" in text
+    assert "np.float64" not in text
+
+
+def test_a_step_putting_the_filter_above_nyquist_is_refused():
+    frame = make_frame(n=50, dt=0.1, segments=False)  # 10 Hz: Nyquist pi/dt = 31.4 rad/s < 40 rad/s
+    with pytest.raises(LogError, match=r"median time step 0\.1 s \(10 Hz\) is too long: the 40 rad/s filter cut-off .*milliseconds"):
+        Log.from_frame(frame)
+    Log.from_frame(make_frame(n=50, dt=0.07, segments=False))
+    check_frame(frame, max_sample_time=0.2)  # settable

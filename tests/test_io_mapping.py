@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agvdyn.io import MappingError, Signal, mapping_from_dict, read_mapping
-from agvdyn.io.mapping import Side
+from agvdyn.io.mapping import Side, gear_ratio
+from agvdyn.platform import PROTOTYPE, Geometry
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "examples" / "mappings"
 
@@ -69,6 +70,8 @@ DELETE = object()
         (lambda: edited(base(), "signals.beta_rr.scale", "x"), r"signals\.beta_rr\.scale: 'x' is not a finite number"),
         (lambda: edited(base(), "signals.beta_rr.column", "c"), r"signals\.beta_rr\.column: not allowed for input ros2_bag"),
         (lambda: edited(base(), "rate", -5), r"rate: -5: expected a number > 0"),
+        (lambda: edited(base(), "i_G", 0), r"mine\.yaml: i_G: 0: expected a number > 0"),
+        (lambda: edited(base(), "i_G", "25"), r"i_G: '25' is not a finite number"),
         (lambda: edited(base(), "stamps", "bag"), r"stamps: 'bag': expected one of \['header', 'receive'\]"),
         (lambda: edited(base(), "time", {"column": "t"}), r"time: only used with input table"),
         (lambda: edited(base(), "segments", [{"name": "steer_left", "start": 0, "end": 5}, {"name": "straight", "start": 4, "end": 8}]),
@@ -133,3 +136,28 @@ def test_from_si_inverts_to_si(quantity, sign, scale, offset, side, i_G, raw):
     )
     raw = np.array(raw)
     np.testing.assert_allclose(sig.from_si(sig.to_si(raw, i_G), i_G), raw, rtol=1e-9, atol=1e-7)
+
+
+def test_gear_ratio_key_and_which_signals_need_it():
+    bag = mapping_from_dict(base())
+    assert bag.i_G is None
+    assert bag.gear_quantities == ("m_fl", "m_rl", "m_fr", "m_rr")  # wheel-side torques
+    table = mapping_from_dict(table_base())
+    assert table.gear_quantities == ("beta_fl", "beta_rl", "beta_fr", "beta_rr")  # motor-side encoders
+    with_ratio = mapping_from_dict(edited(base(), "i_G", 18.5))
+    assert with_ratio.i_G == 18.5 and mapping_from_dict(with_ratio.to_dict()).i_G == 18.5
+    assert gear_ratio(with_ratio) == (18.5, "mapping")
+    assert gear_ratio(bag, PROTOTYPE) == (25.0, "platform prototype")
+    other = Geometry(l=1.2, b=0.8, a=0.05, r=0.1, i_G=18.5, name="mine")
+    assert gear_ratio(with_ratio, other) == (18.5, "platform mine")  # both, agreeing
+    with pytest.raises(MappingError, match=r"declares i_G: 18\.5 but the platform prototype has i_G = 25"):
+        gear_ratio(with_ratio, PROTOTYPE)
+    with pytest.raises(MappingError, match=r"m_fl \('front_left_wheel_joint', side: wheel\).*--platform FILE.*'i_G: <ratio>'"):
+        gear_ratio(bag)
+    no_gear = mapping_from_dict(edited(table_base(), "signals.beta_fl.side", "wheel"))
+    for q in ("beta_rl", "beta_fr", "beta_rr"):
+        no_gear = mapping_from_dict(edited(no_gear.to_dict(), f"signals.{q}.side", "wheel"))
+    assert no_gear.gear_quantities == () and gear_ratio(no_gear) == (None, None)
+    with pytest.raises(MappingError, match="needs the gear ratio"):
+        Signal("beta_fl", "x", "rad", side=Side.MOTOR).to_si(np.zeros(1), None)
+    assert Signal("beta_fl", "x", "rad", side=Side.WHEEL).to_si(np.ones(1), None)[0] == 1.0

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agvdyn.io import LogError, load_log, mapping_from_dict, read_log, read_mapping, write_log
+from agvdyn.io import LogError, MappingError, load_log, mapping_from_dict, read_log, read_mapping, write_log
 from agvdyn.io.log import LOG_COLUMNS
 from agvdyn.platform import Geometry, PROTOTYPE
 
@@ -42,10 +42,15 @@ def datalogger_csv(path: Path, t: np.ndarray, i_G: float = PROTOTYPE.i_G) -> dic
     return tr
 
 
+def load(path, mapping=DATALOGGER, platform=PROTOTYPE, **kw):
+    """load_log with the prototype's gear ratio (the data logger's encoders are on the motor side)."""
+    return load_log(path, mapping, platform, **kw)
+
+
 def test_datalogger_csv_in_degrees_counts_and_currents(tmp_path):
     t = np.arange(1500) * 0.002
     tr = datalogger_csv(tmp_path / "plc.csv", t)
-    log = load_log(tmp_path / "plc.csv", DATALOGGER)
+    log = load(tmp_path / "plc.csv", DATALOGGER)
     np.testing.assert_array_equal(log.t, t * 1e3 * 1e-3)
     for col in ("alpha_l", "alpha_r"):
         np.testing.assert_allclose(log.frame[col], tr[col], atol=1e-12)
@@ -67,8 +72,21 @@ def test_gear_ratio_comes_from_the_platform(tmp_path):
     tr = datalogger_csv(tmp_path / "plc.csv", t, i_G=10.0)
     log = load_log(tmp_path / "plc.csv", DATALOGGER, platform=other)
     np.testing.assert_allclose(log.frame["beta_fl"], tr["beta_fl"], atol=0.5 * W / CPR / 10.0 * (1 + 1e-9))
-    wrong = load_log(tmp_path / "plc.csv", DATALOGGER)  # prototype i_G = 25
-    np.testing.assert_allclose(wrong.frame["beta_fl"], tr["beta_fl"] * 10.0 / 25.0, atol=1e-3)
+    assert log.sidecar["conversion"]["i_G"] == 10.0
+    # No gear ratio assumed: refused, naming the signals that need it and both ways to give it.
+    with pytest.raises(MappingError) as err:
+        load_log(tmp_path / "plc.csv", DATALOGGER)
+    text = str(err.value)
+    assert "csv_datalogger.yaml" in text and "beta_fl ('enc_FL', side: motor)" in text and "beta_rr" in text
+    assert "m_fl" not in text  # motor-side currents need no gear ratio
+    assert "--platform FILE" in text and "'i_G: <ratio>'" in text
+    data = read_mapping(DATALOGGER).to_dict()
+    data["i_G"] = 10.0
+    by_mapping = load_log(tmp_path / "plc.csv", mapping_from_dict(data))
+    np.testing.assert_array_equal(by_mapping.beta, log.beta)
+    assert by_mapping.sidecar["conversion"]["i_G_source"] == "mapping"
+    with pytest.raises(MappingError, match=r"declares i_G: 10 but the platform prototype has i_G = 25"):
+        load_log(tmp_path / "plc.csv", mapping_from_dict(data), PROTOTYPE)
 
 
 def test_irregular_csv_resampled_onto_a_uniform_time_base(tmp_path):
@@ -77,7 +95,7 @@ def test_irregular_csv_resampled_onto_a_uniform_time_base(tmp_path):
     tr = datalogger_csv(tmp_path / "plc.csv", t)
     data = read_mapping(DATALOGGER).to_dict()
     data["rate"] = 500.0
-    log = load_log(tmp_path / "plc.csv", mapping_from_dict(data))
+    log = load(tmp_path / "plc.csv", mapping_from_dict(data))
     np.testing.assert_allclose(np.diff(log.t), 0.002, rtol=1e-9)
     assert log.t[0] == pytest.approx(t[0], abs=1e-12)
     ref = truth(log.t)
@@ -120,7 +138,7 @@ def test_missing_column_names_the_mapping_key(tmp_path):
     frame = pd.read_csv(tmp_path / "plc.csv").rename(columns={"enc_RL": "encRL"})
     frame.to_csv(tmp_path / "plc.csv", index=False)
     with pytest.raises(LogError, match=r"plc\.csv: missing columns 'enc_RL' \(mapping key signals\.beta_rl\); columns found: .*'encRL'"):
-        load_log(tmp_path / "plc.csv", DATALOGGER)
+        load(tmp_path / "plc.csv", DATALOGGER)
 
 
 def test_non_numeric_source_value_names_column_and_line(tmp_path):
@@ -130,7 +148,7 @@ def test_non_numeric_source_value_names_column_and_line(tmp_path):
     frame.loc[7, "cur_FR"] = "ERR"
     frame.to_csv(tmp_path / "plc.csv", index=False)
     with pytest.raises(LogError, match=r"column 'cur_FR', row 7 \(line 9 of the file\): value 'ERR' is not a number"):
-        load_log(tmp_path / "plc.csv", DATALOGGER)
+        load(tmp_path / "plc.csv", DATALOGGER)
 
 
 def test_decreasing_source_time(tmp_path):
@@ -138,7 +156,7 @@ def test_decreasing_source_time(tmp_path):
     t[20] = t[18]
     datalogger_csv(tmp_path / "plc.csv", t)
     with pytest.raises(LogError, match=r"column 'time_ms', row 20 \(line 22 of the file\): decreasing time"):
-        load_log(tmp_path / "plc.csv", DATALOGGER)
+        load(tmp_path / "plc.csv", DATALOGGER)
 
 
 def test_unknown_translated_segment(tmp_path):
@@ -148,7 +166,7 @@ def test_unknown_translated_segment(tmp_path):
     frame.loc[30, "phase"] = 9
     frame.to_csv(tmp_path / "plc.csv", index=False)
     with pytest.raises(LogError, match=r"column 'segment', row 30 .*unknown segment name '9'"):
-        load_log(tmp_path / "plc.csv", DATALOGGER)
+        load(tmp_path / "plc.csv", DATALOGGER)
 
 
 def test_degrees_without_mapping_are_refused(tmp_path):
@@ -156,7 +174,7 @@ def test_degrees_without_mapping_are_refused(tmp_path):
     tr = truth(t)
     tr["alpha_l"] = np.degrees(tr["alpha_l"]) + 10
     pd.DataFrame({"t": t, **tr}).to_csv(tmp_path / "deg.csv", index=False)
-    with pytest.raises(LogError, match="beyond the mechanical range"):
+    with pytest.raises(LogError, match="beyond the mechanical stop .*expected radians"):
         load_log(tmp_path / "deg.csv")
 
 
@@ -165,3 +183,73 @@ def test_bag_mapping_on_a_table_is_refused(tmp_path):
     datalogger_csv(tmp_path / "plc.csv", t)
     with pytest.raises(LogError, match="mapping with input: table"):
         load_log(tmp_path / "plc.csv", MAPPINGS / "ros2_control.yaml")
+
+
+# --- real logs: time units, dropouts, steering stops ------------------------------------------
+
+@pytest.mark.parametrize(("declared", "suggested", "words"), [
+    ("s", "ms", "too long (time in milliseconds?)"),  # a column in ms declared as s: steps of 2 "s"
+    ("ms", "s", "too short"),  # a column in s declared as ms: steps of 2 us
+])
+def test_declared_time_unit_that_makes_the_step_implausible(tmp_path, declared, suggested, words):
+    t = np.arange(300) * 0.002
+    datalogger_csv(tmp_path / "plc.csv", t)
+    frame = pd.read_csv(tmp_path / "plc.csv")
+    frame["time_ms"] = t * 1e3 if suggested == "ms" else t  # the column's real unit
+    frame.to_csv(tmp_path / "plc.csv", index=False)
+    data = read_mapping(DATALOGGER).to_dict()
+    data["time"]["unit"] = declared
+    with pytest.raises(LogError) as err:
+        load(tmp_path / "plc.csv", mapping_from_dict(data))
+    text = str(err.value)
+    assert f"column 'time_ms' with time.unit: {declared}" in text and words in text
+    assert f"time: {{column: time_ms, unit: {suggested}}}" in text
+    assert "np.float64" not in text
+
+
+def test_table_with_a_dropout_is_read_with_a_time_gap(tmp_path):
+    t = np.arange(1500) * 0.002
+    t[800:] += 0.1  # 0.1 s missing at 500 Hz
+    datalogger_csv(tmp_path / "plc.csv", t)
+    log = load(tmp_path / "plc.csv")
+    assert log.stretches() == (slice(0, 800), slice(800, 1500))
+    assert log.sidecar["conversion"]["notes"] == []
+
+
+def test_resampled_table_leaves_out_the_points_inside_a_gap(tmp_path):
+    rng = np.random.default_rng(5)
+    t = np.arange(1500) * 0.002 + rng.uniform(-3e-4, 3e-4, 1500)
+    t = np.delete(t, np.arange(700, 750))  # 0.1 s missing
+    datalogger_csv(tmp_path / "plc.csv", t)
+    data = read_mapping(DATALOGGER).to_dict()
+    data["rate"] = 500.0
+    log = load(tmp_path / "plc.csv", mapping_from_dict(data))
+    (a, b), = log.gaps()
+    assert a < t[699] + 0.002 and b > t[700] - 0.002 and b - a > 0.09
+    assert a >= t[699] - 0.002 and b <= t[700] + 0.002
+    first, second = log.stretches()
+    np.testing.assert_allclose(np.diff(log.t[first]), 0.002, rtol=1e-9)
+    np.testing.assert_allclose(np.diff(log.t[second]), 0.002, rtol=1e-9)
+    (note,) = log.sidecar["conversion"]["notes"]
+    assert note.startswith("all 10 signals: no sample between t = ") and "not interpolated over" in note and "left out" in note
+    ref = truth(log.t)
+    h = 0.0026  # longest interval of the jittered rows outside the dropout: nothing bridged the 0.1 s
+    assert np.abs(log.frame["alpha_l"] - ref["alpha_l"]).max() <= h**2 / 8 * 0.6 * (W * 0.25) ** 2 * 1.001
+
+
+def test_table_steering_within_the_stop_tolerance_is_clipped(tmp_path):
+    t = np.arange(300) * 0.002
+    datalogger_csv(tmp_path / "plc.csv", t)
+    frame = pd.read_csv(tmp_path / "plc.csv")
+    frame.loc[[5, 6], "steer_R_deg"] = -90.3  # 5 mrad beyond the stop
+    frame.to_csv(tmp_path / "plc.csv", index=False)
+    before = (tmp_path / "plc.csv").read_bytes()
+    log = load(tmp_path / "plc.csv")
+    assert log.clipped == {"alpha_l": 0, "alpha_r": 2} and log.alpha[5, 1] == -math.pi / 2
+    assert log.sidecar["conversion"]["clipped_to_stops"] == {"alpha_l": 0, "alpha_r": 2}
+    assert (tmp_path / "plc.csv").read_bytes() == before
+    frame.loc[5, "steer_R_deg"] = -92.0
+    frame.to_csv(tmp_path / "plc.csv", index=False)
+    with pytest.raises(LogError, match=r"column 'alpha_r', row 5 \(t = 0\.01 s\): steering angle -1\.6057 rad is beyond the mechanical stop -1\.5708 rad"):
+        load(tmp_path / "plc.csv")
+    assert load(tmp_path / "plc.csv", stop_tolerance=0.05).clipped["alpha_r"] == 2

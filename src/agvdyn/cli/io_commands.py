@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.io import LogError, MappingError, load_log, sidecar_platform, write_log
+from agvdyn.io import STOP_TOLERANCE, LogError, MappingError, load_log, sidecar_platform, write_log
 from agvdyn.io.summary import summarize_log
 from agvdyn.kinematics import MODE_TOLERANCE
 from agvdyn.platform import PlatformFileError
@@ -23,19 +23,27 @@ def convert(
     input: Path = typer.Argument(..., help="Log in our schema (.parquet/.csv), any CSV/Parquet table, or a ROS 2 bag (directory, .db3, .mcap)."),
     out: Path = typer.Option(..., "--out", "-o", help="Log to write in our schema (.parquet or .csv); sidecar <out>.yaml records the conversion."),
     mapping: Optional[Path] = typer.Option(None, help="Mapping file (YAML) naming joints/columns and units; see examples/mappings/."),
-    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML) for the gear ratio i_G; default: the built-in prototype."),
+    platform: Optional[Path] = typer.Option(
+        None, help="Platform file (YAML) for the gear ratio i_G of motor-side encoders and wheel-side torques; "
+        "without it the mapping must declare i_G: when such signals are mapped (no ratio is assumed)."),
+    stop_tolerance: float = typer.Option(
+        STOP_TOLERANCE, help="rad beyond the steering stops +-pi/2 that is clipped to the stop (sensor noise); further out is an error."),
 ) -> None:
     """Convert a ROS 2 bag or a table to our log schema, so that you can look at what was understood."""
-    geom = platform_option(platform)
+    geom = platform_option(platform) if platform is not None else None
     if out.resolve() == input.resolve():
         raise fail(f"{out}: the output would overwrite the input; choose another --out")
     try:
-        log = load_log(input, mapping, geom)
+        log = load_log(input, mapping, geom, stop_tolerance=stop_tolerance)
         sidecar = dict(log.sidecar)
-        if platform is not None or "platform" not in sidecar:
-            sidecar["platform"] = geom.to_dict()  # the platform whose i_G the conversion used
+        if geom is not None:
+            sidecar["platform"] = geom.to_dict()  # the platform given (its i_G is in sidecar['conversion'])
+        if any(log.clipped.values()):
+            sidecar["clipped_to_stops"] = dict(log.clipped)  # the written angles are clipped
         written = write_log(out, log.frame, sidecar)
     except _LOAD_ERRORS as exc:
+        raise fail(str(exc)) from exc
+    except ValueError as exc:  # a bad option value (for example a negative --stop-tolerance)
         raise fail(str(exc)) from exc
     except OSError as exc:
         raise fail(f"{out}: cannot be written: {exc}") from exc
@@ -43,8 +51,17 @@ def convert(
     conv = log.sidecar.get("conversion", {})
     if conv.get("method"):
         typer.echo(f"resampled at {conv['rate']:g} Hz: {conv['method']}")
+    if conv.get("i_G") is not None:
+        typer.echo(f"gear ratio i_G = {conv['i_G']:g} (from the {conv['i_G_source']})")
     for note in conv.get("notes", []) or []:
         typer.echo(f"note: {note}")
+    if any(log.clipped.values()):
+        counts = ", ".join(f"{n} rows of {col}" for col, n in log.clipped.items())
+        typer.echo(f"note: clipped to the steering stops +-pi/2 (within {stop_tolerance:g} rad): {counts}")
+    gaps = log.gaps()
+    if gaps:
+        listed = ", ".join(f"{a:.6g} s to {b:.6g} s" for a, b in gaps[:5]) + (f" and {len(gaps) - 5} more" if len(gaps) > 5 else "")
+        typer.echo(f"note: {len(gaps)} time gap(s) (dropouts; identification uses the {len(gaps) + 1} continuous stretches): {listed}")
 
 
 @app.command()

@@ -8,6 +8,8 @@ from agvdyn.io.log import (
     LOG_COLUMNS,
     SEGMENT_COLUMN,
     SEGMENTS,
+    STOP_TOLERANCE,
+    STRETCH_GAP_SAMPLES,
     Log,
     LogError,
     SegmentRun,
@@ -22,7 +24,7 @@ from agvdyn.io.mapping import LogMapping, MappingError, Signal, mapping_from_dic
 from agvdyn.io.table import read_mapped_table
 
 __all__ = [
-    "LOG_COLUMNS", "SEGMENT_COLUMN", "SEGMENTS", "Log", "LogError", "SegmentRun",
+    "LOG_COLUMNS", "SEGMENT_COLUMN", "SEGMENTS", "STOP_TOLERANCE", "STRETCH_GAP_SAMPLES", "Log", "LogError", "SegmentRun",
     "check_frame", "read_log", "read_sidecar", "sidecar_path", "sidecar_platform", "write_log",
     "LogMapping", "MappingError", "Signal", "mapping_from_dict", "read_mapping",
     "load_log", "read_mapped_table", "is_bag", "read_bag", "write_bag",

@@ -39,36 +39,51 @@ def uniform_grid(series: MappingABC[str, Series], period: float) -> np.ndarray:
     return start + np.arange(n) * period
 
 
-def resample(
+def resample(series: MappingABC[str, Series], grid: np.ndarray) -> dict[str, np.ndarray]:
+    """Linear interpolation of each series onto ``grid`` (see :data:`RESAMPLING_METHOD`).
+
+    Every grid point is interpolated, also inside gaps; :func:`gap_points` says which points
+    lie inside a gap too long to be interpolated over.
+    """
+    return {key: np.interp(grid, s.times, s.values) for key, s in series.items()}
+
+
+def gap_points(
     series: MappingABC[str, Series],
     grid: np.ndarray,
     max_gap: float,
-    source: str,
     time_note: str = "",
-) -> dict[str, np.ndarray]:
-    """Linear interpolation of each series onto ``grid`` (see :data:`RESAMPLING_METHOD`).
+) -> tuple[np.ndarray, list[str]]:
+    """Grid points that may be interpolated, and a note per gap that may not.
 
-    Raises
-    ------
-    LogError
-        A series has an interval longer than ``max_gap`` inside the grid's range: the samples
-        there are too sparse to be interpolated honestly. The message names the signal and the time.
+    A point strictly between two samples of a series that are more than ``max_gap`` apart is
+    not interpolated over (the data there are missing, not sparse): it is left out, so that the
+    converted log has a time gap there (a dropout, :meth:`agvdyn.io.Log.stretches`).
+
+    Returns
+    -------
+    keep : (len(grid),) bool, False at the points inside a gap of any series.
+    notes : one text per gap (signals with the same gap named together), in time order.
     """
-    out: dict[str, np.ndarray] = {}
+    keep = np.ones(grid.size, dtype=bool)
+    found: dict[tuple[float, float], list[str]] = {}
     lo, hi = grid[0], grid[-1]
-    for key, s in series.items():
+    for s in series.values():
         dt = np.diff(s.times)
-        inside = (s.times[1:] > lo) & (s.times[:-1] < hi)
-        bad = inside & (dt > max_gap)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise LogError(
-                f"{source}: {s.label}: no sample between t = {s.times[i]:.6f} s and t = {s.times[i + 1]:.6f} s"
-                f"{time_note} (gap {dt[i]:.6g} s): longer than the {max_gap:.6g} s that may be "
-                "interpolated over; record at a higher rate, cut the log, or raise max_gap in the mapping"
-            )
-        out[key] = np.interp(grid, s.times, s.values)
-    return out
+        for i in np.flatnonzero((dt > max_gap) & (s.times[1:] > lo) & (s.times[:-1] < hi)):
+            a, b = float(s.times[i]), float(s.times[i + 1])
+            keep[np.searchsorted(grid, a, side="right"):np.searchsorted(grid, b, side="left")] = False
+            found.setdefault((a, b), []).append(s.label)
+    notes = []
+    for (a, b), labels in sorted(found.items()):
+        left = int(np.count_nonzero((grid > a) & (grid < b)))
+        who = f"all {len(labels)} signals" if len(labels) == len(series) > 1 else ", ".join(labels)
+        notes.append(
+            f"{who}: no sample between t = {a:.6f} s and t = {b:.6f} s{time_note} "
+            f"(gap {b - a:.6g} s, longer than max_gap {max_gap:.6g} s): not interpolated over, "
+            f"{left} points of the time base left out (the log has a time gap there)"
+        )
+    return keep, notes
 
 
 #: Tolerance of segment range boundaries, s: the resolution of bag stamps (1 ns), so that a row

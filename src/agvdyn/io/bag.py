@@ -5,14 +5,19 @@ irregular times, possibly in several messages per cycle (for example steering an
 joints from different controllers). Every mapped signal (position of angle joints, effort of
 torque joints) is taken as its own time series and resampled by linear interpolation onto one
 uniform time base (:data:`agvdyn.io._convert.RESAMPLING_METHOD`), over the time range common
-to all signals, at ``mapping.rate`` or, by default, at the nominal message interval (slope of a
-line fitted through the stamps, median over the signals), rounded to 1 us.
+to all signals, at ``mapping.rate`` or, by default, at the common nominal rate of the joints:
+each joint's interval is estimated from that joint's own stamps (the messages that carry it:
+slope of a line fitted through its stamps), the median over the joints is rounded to 1 us, and
+joints whose rates differ by more than :data:`RATE_SPREAD` are refused unless ``rate`` is given.
+Joints split over several publishers (messages interleaved, each with its own stamps) thus give
+their own rate, not that of the interleaved message stream.
 """
 from __future__ import annotations
 
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -25,18 +30,22 @@ from agvdyn.io._convert import (
     Series,
     assemble_frame,
     check_coupling,
+    gap_points,
     resample,
     segments_from_ranges,
     uniform_grid,
 )
-from agvdyn.io.log import MAX_GAP_SAMPLES, Log, LogError, check_frame
-from agvdyn.io.mapping import HEADING_QUANTITIES, InputKind, LogMapping, MappingError, Stamps
-from agvdyn.platform import PROTOTYPE, Geometry, read_platform
+from agvdyn.io.log import MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, _check
+from agvdyn.io.mapping import HEADING_QUANTITIES, InputKind, LogMapping, MappingError, Stamps, gear_ratio
+from agvdyn.platform import Geometry, read_platform
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Suffixes of single-file bag storages; a bag directory holds metadata.yaml.
 BAG_SUFFIXES = (".db3", ".mcap")
 Storage = Literal["sqlite3", "mcap"]
+#: Largest relative spread of the joints' own rates (fastest / slowest - 1) that gives a common
+#: default time base; beyond it the mapping must give ``rate``.
+RATE_SPREAD = 0.10
 
 
 def is_bag(path: str | os.PathLike) -> bool:
@@ -144,18 +153,30 @@ def _message_interval(t_ns: np.ndarray) -> float:
 def read_bag(
     path: str | os.PathLike,
     mapping: LogMapping,
-    geometry: Geometry,
+    geometry: Geometry | None = None,
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
 ) -> Log:
     """Convert the JointState messages of a ROS 2 bag to a checked :class:`Log`.
 
     Parameters
     ----------
     path : bag directory (with metadata.yaml), or a single ``.db3`` / ``.mcap`` file.
-    mapping : a mapping with ``input: ros2_bag`` (joints, units, topic, stamps, rate, segments).
-    geometry : platform; its ``i_G`` converts motor-side angles and wheel-side torques.
-    max_gap_samples : passed to :func:`check_frame` for the converted log.
+    mapping : a mapping with ``input: ros2_bag`` (joints, units, topic, stamps, rate, segments, i_G).
+    geometry : platform; its ``i_G`` converts motor-side angles and wheel-side torques. None: the
+        mapping's ``i_G``; refused when signals need a gear ratio and neither gives it
+        (:func:`agvdyn.io.mapping.gear_ratio`).
+    max_gap_samples : passed to :func:`check_frame` for the converted log (default unlimited).
+    stop_tolerance : steering angles beyond +-pi/2 by at most this (rad) are clipped and counted.
+
+    Time base: ``mapping.rate``, else the common rate of the joints, each joint's interval
+    estimated from its own stamps (joints split over several publishers keep their own rate);
+    joints whose rates differ by more than :data:`RATE_SPREAD` are refused unless ``rate`` is
+    given. Where a signal has no sample for longer than ``mapping.max_gap`` (default 5 nominal
+    intervals of the slowest joint or of the time base, whichever is longer), the points of the time
+    base inside that gap are left out: the log has a time gap there (a dropout, noted in
+    ``sidecar['conversion']['notes']``), nothing is interpolated over it.
 
     Times: header stamps (``stamps: header``), or bag receive times when every header stamp
     of the topic is zero (noted in ``sidecar['conversion']['notes']``) or with ``stamps: receive``.
@@ -167,12 +188,14 @@ def read_bag(
     ------
     LogError
         Missing topic, wrong message type, missing joint or field, stamps that do not increase
-        for a joint, gaps longer than ``mapping.max_gap`` (default 5 nominal intervals of the source or
-        of the time base, whichever is longer), mirror coupling violated.
+        for a joint, joints at different rates without ``rate``, mirror coupling violated.
+    MappingError
+        No gear ratio for signals that need one, or platform and mapping disagree on it.
     """
     path = Path(path)
     if mapping.input is not InputKind.ROS2_BAG:
         raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}, but {path} is a ROS 2 bag: use a mapping with input: ros2_bag")
+    i_G, i_G_source = gear_ratio(mapping, geometry)
     msgs = _read_messages(path, mapping.topic)
     notes: list[str] = []
     if mapping.stamps is Stamps.RECEIVE:
@@ -211,12 +234,29 @@ def read_bag(
             )
         if ok.sum() < 2:
             raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}): fewer than 2 finite {sig.field} values")
-        raw_series[sig.quantity] = (t_ns[ok], sig.to_si(vals[ok], geometry.i_G))
+        raw_series[sig.quantity] = (t_ns[ok], sig.to_si(vals[ok], i_G))
 
-    source_ns = float(np.median([_message_interval(t) for t, _ in raw_series.values()]))
+    # Each joint's interval from its own stamps (all its mapped fields), not from the message stream.
+    joint_ns: dict[str, float] = {}
+    for joint in mapping.sources:
+        stamps = np.unique(np.concatenate([raw_series[s.quantity][0] for s in mapping.signals if s.source == joint]))
+        joint_ns[joint] = _message_interval(stamps) if stamps.size > 1 else float("nan")
+    intervals = np.array([v for v in joint_ns.values() if np.isfinite(v) and v > 0])
+    if intervals.size == 0:
+        raise LogError(f"{path}: cannot infer a sample rate from the stamps; set 'rate' in the mapping")
+    source_ns = float(np.median(intervals))
+    slowest_ns = float(intervals.max())
     if mapping.rate is not None:
         period_ns = int(round(1e9 / mapping.rate))
     else:
+        if slowest_ns > (1.0 + RATE_SPREAD) * float(intervals.min()):
+            rates = ", ".join(f"{j!r} {1e9 / v:.4g} Hz" for j, v in joint_ns.items() if np.isfinite(v))
+            raise LogError(
+                f"{path}: the joints on {mapping.topic} publish at different rates ({rates}; each from its own stamps), "
+                f"more than {RATE_SPREAD:.0%} apart: there is no common time base; choose one with a top-level line "
+                f"'rate: <Hz>' in the mapping (for example rate: {1e9 / max(round(float(intervals.min()) / 1000.0) * 1000, 1):.6g}, "
+                "the fastest joint's)"
+            )
         period_ns = int(round(source_ns / 1000.0)) * 1000  # rounded to 1 us
         if period_ns <= 0:
             raise LogError(f"{path}: cannot infer a sample rate from the stamps; set 'rate' in the mapping")
@@ -226,23 +266,30 @@ def read_bag(
         t_ns, v = raw_series[sig.quantity]
         series[sig.quantity] = Series(f"joint {sig.source!r} {sig.field} ({sig.quantity})", (t_ns - t0_ns) / 1e9, v)
     period = period_ns / 1e9
-    # Default: 5 nominal intervals of the source or of the time base, whichever is longer.
-    max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, source_ns / 1e9)
-    t = uniform_grid(series, period)
-    signals = resample(series, t, max_gap, str(path), f" (log time; 0 = {time_kind} {t0_ns} ns)")
+    # Default: 5 nominal intervals of the slowest joint or of the time base, whichever is longer.
+    max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, slowest_ns / 1e9)
+    grid = uniform_grid(series, period)
+    keep, gap_notes = gap_points(series, grid, max_gap, f" (log time; 0 = {time_kind} {t0_ns} ns)")
+    notes.extend(gap_notes)
+    t = grid[keep]
+    signals = {k: v[keep] for k, v in resample(series, grid).items()}
     segments = segments_from_ranges(t, mapping.segments) if isinstance(mapping.segments, tuple) else None
     coupling = check_coupling(signals, t, mapping, str(path))
     frame = assemble_frame(t, signals, segments)
-    checked = check_frame(frame, f"{path} (converted with {mapping.path or 'mapping'})", max_gap_samples=max_gap_samples)
+    checked, clipped = _check(frame, f"{path} (converted with {mapping.path or 'mapping'})",
+                              max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     conversion = {
         "input": "ros2_bag", "file": str(path), "mapping": str(mapping.path) if mapping.path else None,
         "topic": mapping.topic, "time": time_kind, "t0_ns": t0_ns, "rate": 1e9 / period_ns,
+        "joint_rates": {j: (1e9 / v if np.isfinite(v) else None) for j, v in joint_ns.items()},
         "method": RESAMPLING_METHOD, "max_gap": max_gap, "messages": int(len(msgs.stamps)),
-        "notes": notes,
+        "i_G": i_G, "i_G_source": i_G_source, "notes": notes,
     }
     if coupling:
         conversion["coupling_max_deviation"] = coupling
-    return Log(path, checked, {"conversion": conversion})
+    if any(clipped.values()):
+        conversion["clipped_to_stops"] = dict(clipped)
+    return Log(path, checked, {"conversion": conversion}, clipped)
 
 
 def write_bag(
@@ -253,6 +300,8 @@ def write_bag(
     *,
     platform: Geometry | str | os.PathLike | None = None,
     start_ns: int = 1_700_000_000_000_000_000,
+    groups: Sequence[Sequence[str]] | None = None,
+    group_offsets_ns: Sequence[int] | None = None,
 ) -> Path:
     """Write a log as a ROS 2 bag of JointState messages named as in ``mapping``.
 
@@ -263,6 +312,11 @@ def write_bag(
     Mapped rear headings are written as the mirror coupling gives them (-alpha). The bag
     directory is written beside ``path`` and renamed into place; an existing ``path`` is refused.
 
+    With ``groups`` the joints are split over several publishers, as separate controllers do:
+    per sample one message per group holding only that group's joints, stamped
+    ``start_ns + round(t * 1e9) + group_offsets_ns[g]`` (default offset 0; the values stay those
+    of time t, so an offset shifts that group in time), messages interleaved in stamp order.
+
     Parameters
     ----------
     log : the log to write.
@@ -270,8 +324,12 @@ def write_bag(
     mapping : a :class:`LogMapping` with ``input: ros2_bag``, or the path of a mapping file.
     storage : ``"sqlite3"`` or ``"mcap"``.
     platform : Geometry or platform file whose ``i_G`` converts gear sides; None: the platform
-        recorded in the log's sidecar, else the prototype.
+        recorded in the log's sidecar, else the mapping's ``i_G``; refused when signals need a
+        gear ratio and none of these gives it, or when platform and mapping disagree.
     start_ns : absolute stamp of ``t = 0``.
+    groups : joint names per publisher; every joint of the mapping in exactly one group. None: one
+        message with all joints per sample.
+    group_offsets_ns : stamp offset of each group, ns (default all 0).
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -286,7 +344,8 @@ def write_bag(
     elif platform is not None:
         geometry = read_platform(platform)
     else:
-        geometry = sidecar_platform(log) or PROTOTYPE
+        geometry = sidecar_platform(log)
+    i_G, _ = gear_ratio(mapping, geometry)
     if mapping.input is not InputKind.ROS2_BAG:
         raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}: writing a bag needs input: ros2_bag")
     plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
@@ -294,16 +353,25 @@ def write_bag(
         raise ValueError(f"storage={storage!r}: expected one of {list(plugins)}")
     if path.exists():
         raise LogError(f"{path} exists already: not overwriting a bag")
+    joints = list(mapping.sources)
+    if groups is None:
+        groups = [joints]
+    groups = [list(g) for g in groups]
+    flat = [j for g in groups for j in g]
+    if sorted(flat) != sorted(joints) or len(set(flat)) != len(flat):
+        raise ValueError(f"groups={groups!r}: expected every joint of the mapping {joints} in exactly one group")
+    offsets = [0] * len(groups) if group_offsets_ns is None else [int(o) for o in group_offsets_ns]
+    if len(offsets) != len(groups):
+        raise ValueError(f"group_offsets_ns: {len(offsets)} offsets for {len(groups)} groups")
     values = {c: log.frame[c].to_numpy(dtype=np.float64) for c in log.frame.columns if c != "segment"}
     for heading, alpha in HEADING_QUANTITIES.items():
         values[heading] = -values[alpha]
-    joints = list(mapping.sources)
     n = log.n_samples
     position = np.full((n, len(joints)), np.nan)
     effort = np.full((n, len(joints)), np.nan)
     for sig in mapping.signals:
         target = effort if sig.field == "effort" else position
-        target[:, joints.index(sig.source)] = sig.from_si(values[sig.quantity], geometry.i_G)
+        target[:, joints.index(sig.source)] = sig.from_si(values[sig.quantity], i_G)
     stamps = start_ns + np.round(log.t * 1e9).astype(np.int64)
 
     typestore = _typestore()
@@ -317,11 +385,17 @@ def write_bag(
     try:
         with Writer(tmp, version=9, storage_plugin=plugins[storage]) as writer:
             conn = writer.add_connection(mapping.topic, JOINT_STATE, typestore=typestore)
-            for k in range(n):  # one message per sample: the bag format is per message
-                ns = int(stamps[k])
+            cols = [np.array([joints.index(j) for j in g], dtype=np.int64) for g in groups]
+            # (stamp, group, sample) in stamp order: publishers interleave in the bag.
+            g_all = np.repeat(np.arange(len(groups)), n)
+            k_all = np.tile(np.arange(n), len(groups))
+            ns_all = np.concatenate([stamps + off for off in offsets])
+            order = np.lexsort((g_all, ns_all))
+            for ns, g, k in zip(ns_all[order].tolist(), g_all[order].tolist(), k_all[order].tolist()):
+                # one message per sample and group: the bag format is per message
                 msg = JointState(
                     header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=""),
-                    name=joints, position=position[k], velocity=empty, effort=effort[k],
+                    name=groups[g], position=position[k, cols[g]], velocity=empty, effort=effort[k, cols[g]],
                 )
                 writer.write(conn, ns, typestore.serialize_cdr(msg, JOINT_STATE))
         os.replace(tmp, path)

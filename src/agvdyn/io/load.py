@@ -5,10 +5,10 @@ import os
 from pathlib import Path
 
 from agvdyn.io.bag import is_bag, read_bag
-from agvdyn.io.log import LOG_SUFFIXES, MAX_GAP_SAMPLES, Log, LogError, read_log
+from agvdyn.io.log import LOG_SUFFIXES, MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, read_log
 from agvdyn.io.mapping import InputKind, LogMapping, read_mapping
 from agvdyn.io.table import read_mapped_table
-from agvdyn.platform import PROTOTYPE, Geometry, read_platform
+from agvdyn.platform import Geometry, read_platform
 
 PathLike = str | os.PathLike
 
@@ -19,6 +19,7 @@ def load_log(
     platform: Geometry | PathLike | None = None,
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
 ) -> Log:
     """Load any supported log as a checked :class:`Log` in our schema (PLATFORM.md "Files").
 
@@ -33,14 +34,18 @@ def load_log(
           ``input: ros2_bag``.
     mapping : a :class:`LogMapping` or the path of a mapping file; None for our own schema.
     platform : a :class:`Geometry` or a platform file; its gear ratio ``i_G`` converts motor-side
-        encoder angles and wheel-side torques. None: the default prototype of PLATFORM.md.
-    max_gap_samples : longest allowed time step of the resulting log, in nominal sample periods.
+        encoder angles and wheel-side torques. None: the mapping's optional ``i_G``; a mapping with
+        such signals and neither is refused (no gear ratio is assumed). Unused for our own schema.
+    max_gap_samples : longest allowed time step of the resulting log, in nominal sample periods;
+        default unlimited (a dropout is read, see :meth:`Log.stretches`).
+    stop_tolerance : steering angles beyond +-pi/2 by at most this (rad) are clipped to the stop
+        and counted in :attr:`Log.clipped`; further out is an error.
 
     Returns
     -------
     Log
         ``log.path`` is the input path; converted logs carry ``sidecar['conversion']`` (mapping,
-        resampling rate and method, notes).
+        resampling rate and method, ``i_G`` used and its source, notes such as time gaps left).
 
     Raises
     ------
@@ -48,10 +53,11 @@ def load_log(
         The input cannot be read or converted, or fails the checks (message names file, column or
         joint, and the first offending row or time).
     MappingError, PlatformFileError
-        The mapping or platform file is invalid.
+        The mapping or platform file is invalid; the mapping needs a gear ratio that neither the
+        platform nor the mapping gives, or both give different ones.
     """
     path = Path(path)
-    geometry = platform if isinstance(platform, Geometry) else PROTOTYPE if platform is None else read_platform(platform)
+    geometry = platform if isinstance(platform, Geometry) or platform is None else read_platform(platform)
     if mapping is not None and not isinstance(mapping, LogMapping):
         mapping = read_mapping(mapping)
     if not path.exists():
@@ -59,11 +65,11 @@ def load_log(
     if is_bag(path):
         if mapping is None:
             raise LogError(f"{path}: a ROS 2 bag needs a mapping file (--mapping) that names its joints; see examples/mappings/ros2_control.yaml")
-        return read_bag(path, mapping, geometry, max_gap_samples=max_gap_samples)
+        return read_bag(path, mapping, geometry, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     if path.suffix.lower() not in LOG_SUFFIXES:
         raise LogError(f"{path}: unknown input: expected a log ({', '.join(LOG_SUFFIXES)}), a ROS 2 bag directory, .db3 or .mcap")
     if mapping is None:
-        return read_log(path, max_gap_samples=max_gap_samples)
+        return read_log(path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     if mapping.input is not InputKind.TABLE:
         raise LogError(f"{path}: the mapping {mapping.path or ''} is for input {mapping.input.value}, but this is a table: use a mapping with input: table")
-    return read_mapped_table(path, mapping, geometry, max_gap_samples=max_gap_samples)
+    return read_mapped_table(path, mapping, geometry, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)

@@ -37,10 +37,21 @@ SEGMENT_COLUMN = "segment"
 SEGMENTS = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align")
 #: Mechanical range of the steering angles (PLATFORM.md), rad.
 STEERING_LIMIT = math.pi / 2
-#: Tolerance on the steering range check, rad (rounding of recorded angles).
-STEERING_TOLERANCE = 1e-6
-#: Default longest allowed gap between samples, in nominal sample periods (median dt).
-MAX_GAP_SAMPLES = 5.0
+#: Default tolerance beyond the stops, rad: measured steering angles pass +-pi/2 by their noise
+#: (a few mrad, PLATFORM.md); values beyond a stop by at most this much are clipped to the stop
+#: (and counted, :attr:`Log.clipped`), values further out are an error.
+STOP_TOLERANCE = 0.01
+#: Default longest allowed gap between samples, in nominal sample periods (median dt): unlimited.
+#: A log with a dropout is read; identification splits it into continuous stretches
+#: (:meth:`Log.stretches`). Pass a number to refuse gaps.
+MAX_GAP_SAMPLES = math.inf
+#: A time step longer than this many nominal steps (median dt) ends a continuous stretch.
+STRETCH_GAP_SAMPLES = 3.0
+#: Cut-off of the zero-phase filters of the identification, rad/s (PLATFORM.md "Reference values").
+FILTER_CUTOFF = 40.0
+#: Longest plausible nominal sample time, s: at pi / 40 rad/s the filter cut-off reaches the
+#: Nyquist frequency pi / dt. A longer median step is refused (typically time in milliseconds).
+MAX_SAMPLE_TIME = math.pi / FILTER_CUTOFF
 #: Suffixes of our own log files.
 LOG_SUFFIXES = (".parquet", ".csv")
 
@@ -78,33 +89,112 @@ def _row_text(source: str, row: int, csv: bool) -> str:
     return f"row {row} (line {row + 2} of the file)" if csv else f"row {row}"
 
 
+def _show(value: Any) -> str:
+    """A keyword value for messages: numbers as ``:.6g`` (never ``np.float64(...)``), anything else as repr."""
+    if isinstance(value, (int, float, np.number)) and not isinstance(value, (bool, np.bool_)):
+        return f"{float(value):.6g}"
+    return repr(value)
+
+
+def _time_text(value: float) -> str:
+    """A time for messages: plain decimal, at most 6 decimals (``0.14``, ``1731000000.123457``), never a numpy repr."""
+    value = float(value)
+    if not math.isfinite(value):
+        return f"{value}"
+    text = f"{value:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text
+
+
+def _ms_hint(column: str = "t") -> str:
+    """How to fix a time column in milliseconds (the mapping lines of ``agvdyn.io.mapping``)."""
+    return (
+        f"convert '{column}' to seconds, or read the file with a mapping that declares the time unit: a copy of "
+        f"examples/mappings/identity.yaml (input: table) with the line 'time: {{column: {column}, unit: ms}}' "
+        "(load_log(path, mapping), agvdyn convert FILE --mapping MAPPING.yaml --out LOG.parquet)"
+    )
+
+
+def sample_time_error(source: str, nominal: float, column: str = "t") -> str | None:
+    """Why a nominal (median) time step is implausible for a log, None when it is plausible.
+
+    A step of 0.5 "s" or more looks like milliseconds (2 instead of 0.002); any step beyond
+    :data:`MAX_SAMPLE_TIME` puts the 40 rad/s filter cut-off above the Nyquist frequency pi / dt.
+    """
+    if nominal <= MAX_SAMPLE_TIME:
+        return None
+    nyquist = math.pi / nominal
+    if nominal >= 0.5:
+        what = (f"the time column looks like it is in milliseconds: median time step {nominal:.6g} "
+                f"(as seconds {1.0 / nominal:.3g} Hz, where a vehicle log at 500 Hz steps by 0.002 s)")
+    else:
+        what = (f"median time step {nominal:.6g} s ({1.0 / nominal:.4g} Hz) is too long: the {FILTER_CUTOFF:g} rad/s "
+                f"filter cut-off would be above the Nyquist frequency pi/dt = {nyquist:.4g} rad/s "
+                f"(a step of at most {MAX_SAMPLE_TIME:.4g} s is needed); if the time is in milliseconds")
+    return f"{source}: column '{column}': {what}: {_ms_hint(column)}"
+
+
 def check_frame(
     frame: pd.DataFrame,
     source: str | os.PathLike = "<frame>",
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
+    max_sample_time: float = MAX_SAMPLE_TIME,
     csv_rows: bool = False,
 ) -> pd.DataFrame:
     """Check a table against the log schema and return a normalised copy.
 
     The copy has the columns of :data:`LOG_COLUMNS` first (float64), then the ``segment``
     column when present (categorical over :data:`SEGMENTS`, missing = row in no segment), then
-    any extra columns unchanged. The input frame is not modified.
+    any extra columns unchanged. Steering angles beyond the stops ``+-pi/2`` by at most
+    ``stop_tolerance`` (sensor noise) are clipped to the stop in the copy; :func:`read_log` and
+    :meth:`Log.from_frame` count them (:attr:`Log.clipped`). The input frame is not modified.
+
+    Parameters
+    ----------
+    max_gap_samples : longest allowed time step in nominal sample periods (median dt); default
+        unlimited (a dropout is not an error, see :meth:`Log.stretches`).
+    stop_tolerance : rad beyond a stop that is clipped (default :data:`STOP_TOLERANCE`).
+    max_sample_time : longest plausible nominal time step, s (default :data:`MAX_SAMPLE_TIME`).
+    csv_rows : name rows also by their line in a CSV file.
 
     Raises
     ------
     LogError
         Missing columns, non-numeric values, NaN or infinite values, ``t`` not strictly
-        increasing (duplicated or decreasing), gaps longer than ``max_gap_samples`` nominal
-        sample periods (median dt), steering angles beyond ``[-pi/2, pi/2]`` (tolerance
-        :data:`STEERING_TOLERANCE`), unknown segment names. The message names the source,
-        the column and the first offending row.
+        increasing (duplicated or decreasing), a nominal time step longer than
+        ``max_sample_time`` (time in milliseconds), gaps longer than ``max_gap_samples``
+        nominal sample periods, steering angles beyond a stop by more than ``stop_tolerance``
+        (this also catches degrees), unknown segment names. The message names the source, the
+        column and the first offending row.
+    """
+    return _check(frame, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                  max_sample_time=max_sample_time, csv_rows=csv_rows)[0]
+
+
+def _check(
+    frame: pd.DataFrame,
+    source: str | os.PathLike,
+    *,
+    max_gap_samples: float,
+    stop_tolerance: float,
+    max_sample_time: float = MAX_SAMPLE_TIME,
+    csv_rows: bool = False,
+    clip: bool = True,
+) -> tuple[pd.DataFrame, dict[str, int]]:
+    """:func:`check_frame`, also returning the rows clipped to the stops per alpha column.
+
+    With ``clip=False`` (writing) the angles within the tolerance are checked but kept as they are.
     """
     source = str(source)
     if not isinstance(frame, pd.DataFrame):
         raise LogError(f"{source}: expected a pandas DataFrame, got {type(frame).__name__}")
-    if not (isinstance(max_gap_samples, (int, float)) and max_gap_samples >= 1):
-        raise ValueError(f"max_gap_samples={max_gap_samples!r}: expected a number >= 1")
+    if isinstance(max_gap_samples, bool) or not (isinstance(max_gap_samples, (int, float)) and max_gap_samples >= 1):
+        raise ValueError(f"max_gap_samples={_show(max_gap_samples)}: expected a number >= 1 (math.inf: no limit)")
+    if isinstance(stop_tolerance, bool) or not (isinstance(stop_tolerance, (int, float)) and 0 <= stop_tolerance < math.inf):
+        raise ValueError(f"stop_tolerance={_show(stop_tolerance)}: expected a finite number >= 0 (rad)")
+    if isinstance(max_sample_time, bool) or not (isinstance(max_sample_time, (int, float)) and max_sample_time > 0):
+        raise ValueError(f"max_sample_time={_show(max_sample_time)}: expected a number > 0 (s)")
     missing = [c for c in LOG_COLUMNS if c not in frame.columns]
     if missing:
         raise LogError(
@@ -123,7 +213,7 @@ def check_frame(
         if bad.any():
             row = int(np.argmax(bad))
             raise LogError(
-                f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {data[col][row]!r} "
+                f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {data[col][row]:.6g} "
                 "is not finite: expected a finite number (NaN, infinite or empty values are not allowed)"
             )
     dt = np.diff(t)
@@ -133,25 +223,43 @@ def check_frame(
         kind = "duplicated" if dt[i] == 0 else "decreasing"
         raise LogError(
             f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: {kind} time "
-            f"t = {t[i + 1]!r} after t = {t[i]!r}: expected strictly increasing time"
+            f"t = {_time_text(t[i + 1])} after t = {_time_text(t[i])}: expected strictly increasing time"
         )
     nominal = float(np.median(dt))
+    if nominal > max_sample_time:
+        raise LogError(sample_time_error(source, nominal) or (
+            f"{source}: column 't': median time step {nominal:.6g} s is longer than max_sample_time = "
+            f"{max_sample_time:.6g} s; {_ms_hint()}"))
     bad = dt > max_gap_samples * nominal
     if bad.any():
         i = int(np.argmax(bad))
         raise LogError(
             f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: gap of {dt[i]:.6g} s "
-            f"({dt[i] / nominal:.1f} sample periods) from t = {t[i]!r} to t = {t[i + 1]!r}: expected "
-            f"at most {max_gap_samples:g} nominal sample periods of {nominal:.6g} s"
+            f"({dt[i] / nominal:.1f} sample periods) from t = {_time_text(t[i])} s to t = {_time_text(t[i + 1])} s: "
+            f"expected at most {max_gap_samples:g} nominal sample periods of {nominal:.6g} s"
         )
+    clipped = dict.fromkeys(ALPHA_COLUMNS, 0)
+    limit = STEERING_LIMIT + stop_tolerance
     for col in ALPHA_COLUMNS:
-        bad = np.abs(data[col]) > STEERING_LIMIT + STEERING_TOLERANCE
+        mag = np.abs(data[col])
+        bad = mag > limit
         if bad.any():
             row = int(np.argmax(bad))
+            value = float(data[col][row])
+            stop = math.copysign(STEERING_LIMIT, value)
             raise LogError(
-                f"{source}: column '{col}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): steering angle "
-                f"{data[col][row]!r} rad is beyond the mechanical range [-pi/2, pi/2] (expected radians)"
+                f"{source}: column '{col}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): steering "
+                f"angle {value:.6g} rad is beyond the mechanical stop {stop:+.6g} rad (pi/2) by {abs(value) - STEERING_LIMIT:.4g} rad, "
+                f"more than the stop tolerance {stop_tolerance:.4g} rad within which sensor noise is clipped to the stop: "
+                "expected radians in [-pi/2, pi/2] (degrees?); if the sensor really passes the stop by this much, raise the "
+                "tolerance (stop_tolerance= of read_log / load_log / Log.from_frame, or agvdyn convert --stop-tolerance RAD)"
             )
+        over = mag > STEERING_LIMIT
+        n_over = int(np.count_nonzero(over))
+        if n_over:
+            clipped[col] = n_over
+            if clip:
+                data[col] = np.clip(data[col], -STEERING_LIMIT, STEERING_LIMIT)
     # One float64 block (no pandas consolidation pass): fast to build and to slice.
     out = pd.DataFrame(np.column_stack([data[c] for c in LOG_COLUMNS]), columns=list(LOG_COLUMNS))
     if SEGMENT_COLUMN in frame.columns:
@@ -159,7 +267,7 @@ def check_frame(
     for col in frame.columns:
         if col not in out.columns:
             out[col] = frame[col].to_numpy()
-    return out
+    return out, clipped
 
 
 def _numeric_column(series: pd.Series, source: str, col: str, csv_rows: bool) -> np.ndarray:
@@ -192,7 +300,7 @@ def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: boo
         if unknown.any():
             row = int(np.argmax(unknown))
             raise LogError(
-                f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): "
+                f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): "
                 f"unknown segment name {names[codes[row]]!r}: expected one of {list(SEGMENTS)} or empty"
             )
         return pd.Categorical.from_codes(new_codes, categories=list(SEGMENTS))
@@ -203,7 +311,7 @@ def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: boo
     if unknown.any():
         row = int(np.argmax(unknown))
         raise LogError(
-            f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {t[row]!r}): "
+            f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): "
             f"unknown segment name {text.iloc[row]!r}: expected one of {list(SEGMENTS)} or empty"
         )
     return pd.Categorical(text.to_numpy(dtype=object, na_value=None), categories=list(SEGMENTS))
@@ -222,11 +330,20 @@ class Log:
         :data:`SEGMENTS`, missing = no segment) when present, then extra columns. Treat as read only.
     sidecar : dict
         Contents of the YAML sidecar, empty when there is none.
+    clipped : dict[str, int]
+        Rows whose steering angle was beyond a stop (+-pi/2) by at most the stop tolerance and was
+        clipped to the stop when the log was read, per alpha column: ``{"alpha_l": n, "alpha_r": m}``
+        (zeros when none).
     """
 
     path: Path | None
     frame: pd.DataFrame
     sidecar: dict[str, Any] = field(default_factory=dict)
+    clipped: dict[str, int] = field(default_factory=lambda: dict.fromkeys(ALPHA_COLUMNS, 0))
+
+    def __post_init__(self) -> None:
+        # Always both alpha columns, as plain ints (a partial or empty dict counts zeros).
+        object.__setattr__(self, "clipped", {c: int(dict(self.clipped or {}).get(c, 0)) for c in ALPHA_COLUMNS})
 
     @classmethod
     def from_frame(
@@ -236,10 +353,12 @@ class Log:
         path: str | os.PathLike | None = None,
         sidecar: dict[str, Any] | None = None,
         max_gap_samples: float = MAX_GAP_SAMPLES,
+        stop_tolerance: float = STOP_TOLERANCE,
     ) -> "Log":
-        """Check ``frame`` (see :func:`check_frame`) and wrap it in a Log."""
-        checked = check_frame(frame, "<frame>" if path is None else path, max_gap_samples=max_gap_samples)
-        return cls(None if path is None else Path(path), checked, dict(sidecar or {}))
+        """Check ``frame`` (see :func:`check_frame`) and wrap it in a Log (angles within the stop tolerance clipped and counted)."""
+        checked, clipped = _check(frame, "<frame>" if path is None else path, max_gap_samples=max_gap_samples,
+                                  stop_tolerance=stop_tolerance)
+        return cls(None if path is None else Path(path), checked, dict(sidecar or {}), clipped)
 
     def _array(self, columns: tuple[str, ...] | str) -> np.ndarray:
         arr = self.frame[list(columns) if isinstance(columns, tuple) else columns].to_numpy(dtype=np.float64)
@@ -295,6 +414,27 @@ class Log:
     def duration(self) -> float:
         """t[-1] - t[0], s."""
         return float(self.t[-1] - self.t[0])
+
+    def _breaks(self, max_step_samples: float) -> np.ndarray:
+        """Indices i of the time steps t[i] -> t[i+1] longer than ``max_step_samples`` nominal steps."""
+        if isinstance(max_step_samples, bool) or not (isinstance(max_step_samples, (int, float)) and max_step_samples >= 1):
+            raise ValueError(f"max_step_samples={_show(max_step_samples)}: expected a number >= 1 (nominal sample periods)")
+        return np.flatnonzero(np.diff(self.t) > max_step_samples * self.sample_time)
+
+    def stretches(self, max_step_samples: float = STRETCH_GAP_SAMPLES) -> tuple[slice, ...]:
+        """Row slices (half open) of the continuous stretches of the log, in time order.
+
+        The log is split wherever a time step exceeds ``max_step_samples`` times the nominal
+        (median) step: a dropout. A log without dropouts is one stretch ``slice(0, n_samples)``.
+        """
+        cuts = self._breaks(max_step_samples) + 1
+        bounds = [0, *cuts.tolist(), self.n_samples]
+        return tuple(slice(a, b) for a, b in zip(bounds[:-1], bounds[1:]))
+
+    def gaps(self, max_step_samples: float = STRETCH_GAP_SAMPLES) -> tuple[tuple[float, float], ...]:
+        """The dropouts between the stretches of :meth:`stretches`: ``(t before, t after)`` of each, s."""
+        t = self.t
+        return tuple((float(t[i]), float(t[i + 1])) for i in self._breaks(max_step_samples))
 
     def segment_runs(self) -> tuple[SegmentRun, ...]:
         """Contiguous runs of rows with the same segment name, in time order (rows in no segment skipped)."""
@@ -355,15 +495,23 @@ def read_table(path: Path) -> pd.DataFrame:
         raise LogError(f"{path}: cannot be read as {suffix[1:]}: {exc}") from exc
 
 
-def read_log(path: str | os.PathLike, *, max_gap_samples: float = MAX_GAP_SAMPLES) -> Log:
+def read_log(
+    path: str | os.PathLike,
+    *,
+    max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
+) -> Log:
     """Read and check a log in our schema (Parquet or CSV by suffix) and its optional sidecar.
 
-    The file is never modified. See :func:`check_frame` for the checks.
+    The file is never modified. See :func:`check_frame` for the checks. Steering angles beyond a
+    stop by at most ``stop_tolerance`` are clipped to the stop in the returned log and counted in
+    :attr:`Log.clipped`. Dropouts (time gaps) are read; see :meth:`Log.stretches`.
 
     Parameters
     ----------
     path : path of ``*.parquet`` or ``*.csv``; the sidecar ``<path>.yaml`` is read when present.
-    max_gap_samples : longest allowed time step, in nominal sample periods (median dt).
+    max_gap_samples : longest allowed time step, in nominal sample periods (median dt); default unlimited.
+    stop_tolerance : rad beyond the stops +-pi/2 that is clipped (default :data:`STOP_TOLERANCE`).
 
     Raises
     ------
@@ -372,8 +520,9 @@ def read_log(path: str | os.PathLike, *, max_gap_samples: float = MAX_GAP_SAMPLE
     """
     path = Path(path)
     frame = read_table(path)
-    checked = check_frame(frame, path, max_gap_samples=max_gap_samples, csv_rows=path.suffix.lower() == ".csv")
-    return Log(path, checked, read_sidecar(path))
+    checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                              csv_rows=path.suffix.lower() == ".csv")
+    return Log(path, checked, read_sidecar(path), clipped)
 
 
 def sidecar_platform(log: Log) -> Geometry | None:
@@ -418,8 +567,12 @@ def write_log(
     sidecar: dict[str, Any] | None = None,
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
 ) -> Path:
     """Check ``frame`` with the same checks as :func:`read_log` and write it atomically.
+
+    Steering angles within the stop tolerance beyond a stop are written as they are (not
+    clipped), so that a later :func:`read_log` counts them.
 
     Parquet for ``*.parquet``, CSV (header line, full float precision) for ``*.csv``. When
     ``sidecar`` is given it is written atomically to ``<path>.yaml``; when it is None a
@@ -434,7 +587,7 @@ def write_log(
         if sidecar is None and frame.sidecar:
             sidecar = frame.sidecar
         frame = frame.frame
-    checked = check_frame(frame, path, max_gap_samples=max_gap_samples)
+    checked, _ = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance, clip=False)
     side_text = None
     if sidecar is not None:
         if not isinstance(sidecar, dict):

@@ -9,7 +9,9 @@ errors naming the file and the key. Conversion of one signal to SI units is affi
 with ``unit_factor`` 1 (rad), pi/180 (deg), 2 pi (rev), 2 pi / counts_per_rev (counts) for
 angles, and 1 (Nm), 1e-3 (mNm), torque_constant (A) for torques. Wheel angles measured on
 the motor side and torques measured on the wheel side are divided by the gear ratio ``i_G``
-(PLATFORM.md: beta is wheel side, M_mot motor side).
+(PLATFORM.md: beta is wheel side, M_mot motor side). The gear ratio comes from the platform
+given to the reader or from the mapping's optional top-level ``i_G``; a mapping with such signals
+and neither is refused (:func:`gear_ratio`), never converted with an assumed ratio.
 """
 from __future__ import annotations
 
@@ -119,6 +121,11 @@ class Signal:
         """JointState field read for this quantity."""
         return "effort" if self.kind == "torque" else "position"
 
+    @property
+    def needs_gear_ratio(self) -> bool:
+        """True for a wheel angle measured on the motor side or a torque measured on the wheel side."""
+        return (self.kind == "angle" and self.side is Side.MOTOR) or (self.kind == "torque" and self.side is Side.WHEEL)
+
     def unit_factor(self) -> float:
         if self.unit == "counts":
             return 2.0 * math.pi / float(self.counts_per_rev)
@@ -126,20 +133,23 @@ class Signal:
             return float(self.torque_constant)
         return float((ANGLE_UNITS | TORQUE_UNITS)[self.unit])
 
-    def gain(self, i_G: float) -> float:
-        """Factor from the raw value to SI units on the side PLATFORM.md uses."""
+    def gain(self, i_G: float | None) -> float:
+        """Factor from the raw value to SI units on the side PLATFORM.md uses.
+
+        ``i_G`` may be None for signals that do not need it (:attr:`needs_gear_ratio`).
+        """
         gear = 1.0
-        if self.kind == "angle" and self.side is Side.MOTOR:
-            gear = 1.0 / i_G  # motor encoder / i_G = wheel angle
-        if self.kind == "torque" and self.side is Side.WHEEL:
-            gear = 1.0 / i_G  # wheel torque / i_G = motor torque
+        if self.needs_gear_ratio:
+            if i_G is None:
+                raise MappingError(f"signals.{self.quantity}: side {self.side.value} needs the gear ratio i_G, none given")
+            gear = 1.0 / i_G  # motor encoder / i_G = wheel angle; wheel torque / i_G = motor torque
         return self.sign * self.scale * self.unit_factor() * gear
 
-    def to_si(self, raw: np.ndarray, i_G: float) -> np.ndarray:
+    def to_si(self, raw: np.ndarray, i_G: float | None) -> np.ndarray:
         """Raw values -> SI values of the log quantity."""
         return np.asarray(raw, dtype=np.float64) * self.gain(i_G) + self.offset
 
-    def from_si(self, value: np.ndarray, i_G: float) -> np.ndarray:
+    def from_si(self, value: np.ndarray, i_G: float | None) -> np.ndarray:
         """SI values of the log quantity -> raw values (inverse of :meth:`to_si`)."""
         return (np.asarray(value, dtype=np.float64) - self.offset) / self.gain(i_G)
 
@@ -172,7 +182,8 @@ class LogMapping:
     median message interval, rounded to 1 us); tables are resampled only when it is given.
     ``max_gap`` (s) is the longest interval between two samples of one signal that is
     interpolated over (None: 5 nominal intervals of the source or of the time base, whichever
-    is longer). ``time_column``/``time_unit`` apply to tables.
+    is longer). ``time_column``/``time_unit`` apply to tables. ``i_G`` (optional) is the gear
+    ratio for motor-side wheel angles and wheel-side torques when no platform is given.
     """
 
     input: InputKind
@@ -186,6 +197,7 @@ class LogMapping:
     coupling_tolerance: float = DEFAULT_COUPLING_TOLERANCE
     segments: tuple[SegmentRange, ...] | SegmentColumn | None = None
     path: Path | None = None
+    i_G: float | None = None
 
     def __post_init__(self) -> None:
         names = [s.quantity for s in self.signals]
@@ -194,6 +206,13 @@ class LogMapping:
             raise MappingError(f"{self._where()}signals: missing {missing}: a mapping must give all of {list(REQUIRED_QUANTITIES)}")
         if len(set(names)) != len(names):
             raise MappingError(f"{self._where()}signals: a quantity is mapped twice")
+        if self.i_G is not None and not (isinstance(self.i_G, (int, float)) and math.isfinite(self.i_G) and self.i_G > 0):
+            raise MappingError(f"{self._where()}i_G: {self.i_G}: expected a number > 0")
+
+    @property
+    def gear_quantities(self) -> tuple[str, ...]:
+        """Quantities whose conversion needs the gear ratio (motor-side wheel angles, wheel-side torques)."""
+        return tuple(s.quantity for s in self.signals if s.needs_gear_ratio)
 
     def _where(self) -> str:
         return f"{self.path}: " if self.path is not None else ""
@@ -218,6 +237,8 @@ class LogMapping:
             out["rate"] = self.rate
         if self.max_gap is not None:
             out["max_gap"] = self.max_gap
+        if self.i_G is not None:
+            out["i_G"] = self.i_G
         out["coupling_tolerance"] = self.coupling_tolerance
         key = "joint" if self.input is InputKind.ROS2_BAG else "column"
         sig: dict[str, Any] = {}
@@ -243,7 +264,7 @@ class LogMapping:
 
 # --- parsing ---------------------------------------------------------------------------------
 
-_TOP_KEYS = {"input", "topic", "stamps", "rate", "max_gap", "time", "coupling_tolerance", "signals", "segments", "description"}
+_TOP_KEYS = {"input", "topic", "stamps", "rate", "max_gap", "time", "coupling_tolerance", "signals", "segments", "description", "i_G"}
 _SIGNAL_KEYS = {"joint", "column", "unit", "sign", "scale", "offset", "side", "counts_per_rev", "torque_constant"}
 
 
@@ -388,6 +409,7 @@ def mapping_from_dict(data: Any, source: str | os.PathLike = "<mapping>") -> Log
     stamps = r.choice("stamps", data.get("stamps", "header"), Stamps)
     rate = None if data.get("rate") is None else r.number("rate", data["rate"], positive=True)
     max_gap = None if data.get("max_gap") is None else r.number("max_gap", data["max_gap"], positive=True)
+    i_G = None if data.get("i_G") is None else r.number("i_G", data["i_G"], positive=True)
     time = r.mapping("time", data.get("time", {}))
     r.unknown(time, {"column", "unit"}, "time.")
     time_column = r.text("time.column", time.get("column", "t"))
@@ -409,7 +431,49 @@ def mapping_from_dict(data: Any, source: str | os.PathLike = "<mapping>") -> Log
             raise r.fail("time.column", f"{time_column!r} is also mapped as a signal")
     segments = _segments(r, data.get("segments"), kind)
     path = Path(source) if source != "<mapping>" else None
-    return LogMapping(kind, signals, topic, stamps, rate, max_gap, time_column, time_unit, tol, segments, path)
+    return LogMapping(kind, signals, topic, stamps, rate, max_gap, time_column, time_unit, tol, segments, path, i_G)
+
+
+def gear_ratio(mapping: LogMapping, platform: Any = None) -> tuple[float | None, str | None]:
+    """The gear ratio ``i_G`` a conversion with ``mapping`` uses, and where it comes from.
+
+    Parameters
+    ----------
+    mapping : the mapping; its optional ``i_G`` is used when no platform is given.
+    platform : a :class:`agvdyn.platform.Geometry` (anything with ``i_G`` and ``name``) or None.
+
+    Returns
+    -------
+    (i_G, source) : the ratio and ``"platform <name>"`` or ``"mapping"``; ``(None, None)`` when no
+        signal needs it and none is given.
+
+    Raises
+    ------
+    MappingError
+        Signals need the gear ratio (:attr:`LogMapping.gear_quantities`) and neither a platform
+        nor the mapping's ``i_G`` gives it; or both give it and disagree.
+    """
+    where = f"{mapping.path}: " if mapping.path is not None else "mapping: "
+    if platform is not None and mapping.i_G is not None and not math.isclose(float(platform.i_G), mapping.i_G, rel_tol=1e-12):
+        raise MappingError(
+            f"{where}i_G: the mapping declares i_G: {mapping.i_G:.6g} but the platform {getattr(platform, 'name', '')!s} "
+            f"has i_G = {float(platform.i_G):.6g}: the gear ratio must be given once or agree "
+            "(remove i_G from the mapping, or use the platform file of this vehicle)"
+        )
+    if platform is not None:
+        return float(platform.i_G), f"platform {getattr(platform, 'name', '')!s}".rstrip()
+    if mapping.i_G is not None:
+        return mapping.i_G, "mapping"
+    needs = mapping.gear_quantities
+    if needs:
+        described = ", ".join(f"{q} ({mapping.signal(q).source!r}, side: {mapping.signal(q).side.value})" for q in needs)
+        raise MappingError(
+            f"{where}the signals {described} need the gear ratio i_G (motor-side wheel angles and wheel-side "
+            "torques are divided by it), but neither a platform nor the mapping gives it: pass the platform "
+            "(--platform FILE on the command line, platform= in Python) or declare it in the mapping with a "
+            "top-level line 'i_G: <ratio>' (wheel torque / motor torque, for example i_G: 25)"
+        )
+    return None, None
 
 
 def read_mapping(path: str | os.PathLike) -> LogMapping:

@@ -13,40 +13,65 @@ from agvdyn.io._convert import (
     Series,
     assemble_frame,
     check_coupling,
+    gap_points,
     resample,
     segments_from_ranges,
     uniform_grid,
 )
-from agvdyn.io.log import MAX_GAP_SAMPLES, SEGMENT_COLUMN, Log, LogError, _numeric_column, _row_text, check_frame, read_table
-from agvdyn.io.mapping import InputKind, LogMapping, MappingError, SegmentColumn
+from agvdyn.io.log import (
+    MAX_GAP_SAMPLES,
+    MAX_SAMPLE_TIME,
+    SEGMENT_COLUMN,
+    STOP_TOLERANCE,
+    Log,
+    LogError,
+    _check,
+    _numeric_column,
+    _row_text,
+    _time_text,
+    read_table,
+)
+from agvdyn.io.mapping import InputKind, LogMapping, MappingError, SegmentColumn, TimeUnit, gear_ratio
+
+#: Shortest plausible nominal time step of a mapped table, s (100 kHz): a shorter one means a
+#: wrong ``time.unit`` (seconds declared as ms, ...).
+MIN_SAMPLE_TIME = 1e-5
 from agvdyn.platform import Geometry
 
 
 def read_mapped_table(
     path: str | os.PathLike,
     mapping: LogMapping,
-    geometry: Geometry,
+    geometry: Geometry | None = None,
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
+    stop_tolerance: float = STOP_TOLERANCE,
 ) -> Log:
     """Convert a CSV or Parquet table with its own column names and units to a checked :class:`Log`.
 
-    Each mapped column is converted to SI units (:meth:`Signal.to_si`, ``geometry.i_G`` for
-    gear sides), the time column by ``mapping.time_unit``. Without ``mapping.rate`` the samples
-    keep their times; with it they are resampled by linear interpolation onto a uniform time base
-    at that rate (segment names: the value of the latest sample at or before each new time).
+    Each mapped column is converted to SI units (:meth:`Signal.to_si`; gear sides by the gear
+    ratio of ``geometry``, else the mapping's ``i_G``), the time column by ``mapping.time_unit``.
+    Without ``mapping.rate`` the samples keep their times (a dropout stays a time gap); with it
+    they are resampled by linear interpolation onto a uniform time base at that rate (segment
+    names: the value of the latest sample at or before each new time), leaving out the points
+    inside a gap longer than ``mapping.max_gap`` (noted in ``sidecar['conversion']['notes']``).
     Segments come from ``mapping.segments`` (time ranges or a column), else from a ``segment``
-    column when the table has one. The file is never modified.
+    column when the table has one. Steering angles beyond +-pi/2 by at most ``stop_tolerance``
+    are clipped and counted (:attr:`Log.clipped`). The file is never modified.
 
     Raises
     ------
     LogError
-        Missing or non-numeric columns, non-finite values, non-increasing time, gaps, mirror
-        coupling violated, or the converted log fails the checks of :func:`check_frame`.
+        Missing or non-numeric columns, non-finite values, non-increasing time, a time step
+        implausible for the declared ``time.unit``, mirror coupling violated, or the converted log
+        fails the checks of :func:`check_frame`.
+    MappingError
+        No gear ratio for signals that need one, or platform and mapping disagree on it.
     """
     path = Path(path)
     if mapping.input is not InputKind.TABLE:
         raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}, but {path} is a table: use a mapping with input: table")
+    i_G, i_G_source = gear_ratio(mapping, geometry)
     raw = read_table(path)
     csv = path.suffix.lower() == ".csv"
     needed = {mapping.time_column: "time.column"}
@@ -64,7 +89,7 @@ def read_mapped_table(
         bad = ~np.isfinite(values)
         if bad.any():
             row = int(np.argmax(bad))
-            raise LogError(f"{path}: column '{name}', {_row_text(str(path), row, csv)}: value {values[row]!r} is not finite: expected a finite number")
+            raise LogError(f"{path}: column '{name}', {_row_text(str(path), row, csv)}: value {values[row]:.6g} is not finite: expected a finite number")
         return values
 
     t_src = column(mapping.time_column) * mapping.time_unit.factor
@@ -74,9 +99,11 @@ def read_mapped_table(
         kind = "duplicated" if dt[i] == 0 else "decreasing"
         raise LogError(
             f"{path}: column '{mapping.time_column}', {_row_text(str(path), i + 1, csv)}: {kind} time "
-            f"{raw[mapping.time_column].iloc[i + 1]!r} after {raw[mapping.time_column].iloc[i]!r}: expected strictly increasing time"
+            f"{_time_text(t_src[i + 1] / mapping.time_unit.factor)} after {_time_text(t_src[i] / mapping.time_unit.factor)} "
+            f"({mapping.time_unit.value}): expected strictly increasing time"
         )
-    signals = {s.quantity: s.to_si(column(s.source), geometry.i_G) for s in mapping.signals}
+    _check_time_unit(path, mapping, float(np.median(dt)) if dt.size else 0.0)
+    signals = {s.quantity: s.to_si(column(s.source), i_G) for s in mapping.signals}
 
     seg_src: np.ndarray | None = None
     if isinstance(mapping.segments, SegmentColumn):
@@ -85,14 +112,19 @@ def read_mapped_table(
         seg_src = _segment_names(raw[SEGMENT_COLUMN], {})
 
     conversion: dict = {"input": "table", "file": str(path), "mapping": str(mapping.path) if mapping.path else None,
-                        "time_column": mapping.time_column, "time_unit": mapping.time_unit.value}
+                        "time_column": mapping.time_column, "time_unit": mapping.time_unit.value,
+                        "i_G": i_G, "i_G_source": i_G_source}
+    notes: list[str] = []
     if mapping.rate is not None:
         period = 1.0 / mapping.rate
         # Default: 5 nominal intervals of the source rows or of the time base, whichever is longer.
         max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, float(np.median(dt)))
         series = {q: Series(f"column {mapping.signal(q).source!r} ({q})", t_src, v) for q, v in signals.items()}
-        t = uniform_grid(series, period)
-        signals = resample(series, t, max_gap, str(path))
+        grid = uniform_grid(series, period)
+        keep, gap_notes = gap_points(series, grid, max_gap)
+        notes.extend(gap_notes)
+        t = grid[keep]
+        signals = {k: v[keep] for k, v in resample(series, grid).items()}
         if seg_src is not None:
             seg_src = seg_src[np.searchsorted(t_src, t, side="right") - 1]
         conversion.update(resampled=True, rate=mapping.rate, method=RESAMPLING_METHOD, max_gap=max_gap)
@@ -104,8 +136,34 @@ def read_mapped_table(
     if coupling:
         conversion["coupling_max_deviation"] = coupling
     frame = assemble_frame(t, signals, segments)
-    checked = check_frame(frame, f"{path} (converted with {mapping.path or 'mapping'})", max_gap_samples=max_gap_samples)
-    return Log(path, checked, {"conversion": conversion})
+    checked, clipped = _check(frame, f"{path} (converted with {mapping.path or 'mapping'})",
+                              max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
+    conversion["notes"] = notes
+    if any(clipped.values()):
+        conversion["clipped_to_stops"] = dict(clipped)
+    return Log(path, checked, {"conversion": conversion}, clipped)
+
+
+def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
+    """Refuse a median time step that the declared ``time.unit`` makes implausible, suggesting the unit that fits."""
+    if MIN_SAMPLE_TIME <= nominal <= MAX_SAMPLE_TIME or nominal <= 0:
+        return
+    raw_step = nominal / mapping.time_unit.factor
+    fits = [u for u in TimeUnit if MIN_SAMPLE_TIME <= raw_step * u.factor <= MAX_SAMPLE_TIME]
+    # Prefer the unit that puts the step nearest 2 ms (the paper's sample time).
+    fits.sort(key=lambda u: abs(np.log(raw_step * u.factor / 2e-3)))
+    hint = (f"the column looks like it is in {fits[0].value}: write 'time: {{column: {mapping.time_column}, unit: {fits[0].value}}}'"
+            if fits else f"no time unit gives a plausible step; check the column 'time.column: {mapping.time_column}'")
+    kind = "too long" if nominal > MAX_SAMPLE_TIME else "too short"
+    limit = (f"the 40 rad/s filter cut-off would be above the Nyquist frequency (at most {MAX_SAMPLE_TIME:.4g} s)"
+             if nominal > MAX_SAMPLE_TIME else f"faster than {1 / MIN_SAMPLE_TIME:.6g} Hz is not a vehicle log")
+    milliseconds = " (time in milliseconds?)" if any(u is TimeUnit.MS for u in fits[:1]) else ""
+    of_mapping = f" of the mapping {mapping.path}" if mapping.path is not None else ""
+    raw = f" ({raw_step:.6g} {mapping.time_unit.value})" if mapping.time_unit is not TimeUnit.S else ""
+    raise LogError(
+        f"{path}: column '{mapping.time_column}' with time.unit: {mapping.time_unit.value}{of_mapping} "
+        f"gives a median time step of {nominal:.6g} s{raw}, {kind}{milliseconds}: {limit}; {hint} in the mapping"
+    )
 
 
 def _segment_names(column: pd.Series, names: dict[str, str]) -> np.ndarray:
