@@ -68,6 +68,10 @@ def test_convert_bag_then_inspect(tmp_path):
     assert back.sidecar["conversion"]["i_G"] == PROTOTYPE.i_G
     assert back.sidecar["platform"]["i_G"] == PROTOTYPE.i_G
     result = runner.invoke(app, ["inspect", str(bag), "--mapping", str(mapping), "--json"])
+    assert result.exit_code == 2 and "need the gear ratio i_G" in result.output  # no platform, no i_G: refused
+    write_platform(tmp_path / "proto.yaml", PROTOTYPE)
+    result = runner.invoke(app, ["inspect", str(bag), "--mapping", str(mapping), "--json",
+                                 "--platform", str(tmp_path / "proto.yaml")])
     assert result.exit_code == 0, result.output
     assert [m["mode"] for m in json.loads(result.output)["modes"]] == ["2s", "1", "4"]
 

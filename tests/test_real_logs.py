@@ -171,3 +171,31 @@ def test_cli_reports_slip_events(slip_run, tmp_path):
     assert set(data["slip_events"][0]) >= {"t_start", "t_end", "peak_mps", "wheels"}
     text = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "q.yaml")]).output
     assert "wheel slip:" in text and "rows:" in text
+
+
+def test_inspect_is_the_preflight_check(run, tmp_path):
+    """inspect names the experiment that is missing for which parameter, and shows the row account."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from agvdyn.cli import app
+    from agvdyn.io import write_log
+
+    frame, side = run
+    full = write_log(tmp_path / "full.parquet", frame, side)
+    seg = frame["segment"].astype(str)
+    partial = write_log(tmp_path / "no_rotation.parquet", frame[seg != "rotation"].reset_index(drop=True), side)
+    runner = CliRunner()
+    data = json.loads(runner.invoke(app, ["inspect", str(full), "--json"]).output)
+    assert data["ready"] and data["verdict"].startswith("ready")
+    assert all(e["status"] == "ok" for n, e in data["excitation"].items() if n != "B_w")
+    assert data["excitation"]["B_w"]["status"] == "fixed"
+    assert {"1", "2s", "4"} == {m["mode"] for m in data["mode_timeline"]}
+    assert data["rows"]["used"] > 0.9 * data["samples"]
+    result = runner.invoke(app, ["inspect", str(partial), "--strict"])
+    assert result.exit_code == 1
+    assert "verdict: not ready: C_ch (not excited); record: rotation (mode 4)" in result.output.replace("\n", " ")
+    data = json.loads(runner.invoke(app, ["inspect", str(full), str(partial), "--json"]).output)
+    assert len(data["files"]) == 2 and data["ready"]
+    assert data["files"][1]["gaps"]  # the cut-out rotation leaves a dropout

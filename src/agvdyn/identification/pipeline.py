@@ -32,15 +32,17 @@ from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE, Geometry, Parameters, re
 __all__ = ["identify", "fit_blocks", "load_logs", "platform_for"]
 
 
-def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.PathLike | None = None) -> list[Any]:
+def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.PathLike | None = None,
+              stop_tolerance: float | None = None) -> list[Any]:
     """Logs as :class:`agvdyn.io.Log` objects: paths are loaded and checked with
     ``agvdyn.io.load_log(path, mapping, platform)`` (mapping: for tables and bags not in our
     schema), Log objects are passed through."""
-    from agvdyn.io import load_log
+    from agvdyn.io import STOP_TOLERANCE, load_log
 
     if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha"):
         logs = [logs]
-    out = [load_log(x, mapping, platform) if isinstance(x, (str, os.PathLike)) else x for x in logs]
+    tol = STOP_TOLERANCE if stop_tolerance is None else stop_tolerance
+    out = [load_log(x, mapping, platform, stop_tolerance=tol) if isinstance(x, (str, os.PathLike)) else x for x in logs]
     if not out:
         raise ValueError("no logs given: expected at least one log")
     return out

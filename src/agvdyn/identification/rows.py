@@ -6,8 +6,9 @@ Every row's motion mode comes from its configuration (eq. 9, PLATFORM.md) and it
   steering moving: wheel alignment at rest, mode 1, whatever the angles;
 * chassis at rest otherwise: the mode of the configuration (its chassis rows are stiction rows);
 * chassis moving: the mode of the configuration; the straight configuration with the steering
-  moving is car-like motion (mode 2); moving in no mode's configuration (mode 1's angles), or
-  steering while moving laterally or rotating, is no mode of the model: left out and counted.
+  moving along the ICR relation is car-like motion (mode 2); moving in no mode's configuration
+  (mode 1's angles, or the straight configuration steered off the ICR relation), or steering while
+  moving laterally or rotating, is no mode of the model: left out and counted.
 
 A segment label is a hint: it names the rows' experiment (block names, ``--segments``), and a
 label that disagrees with the row's mode is counted, never a refusal. Rows inside the filter's
@@ -26,7 +27,7 @@ from agvdyn.identification.equations import EquationBlock, projected_block
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
-from agvdyn.kinematics import Mode, detect_mode, kinematic_model
+from agvdyn.kinematics import Mode, detect_mode, icr_residual, kinematic_model
 from agvdyn.platform import Geometry
 from agvdyn.signals import guarded_mask, runs
 
@@ -98,7 +99,10 @@ def row_modes(geometry: Geometry, st: Stretch, settings: IdentificationSettings)
     moving = ~rest
     mode[moving & (config == int(Mode.PARKING))] = NO_MODE
     moving_steered = moving & steering
-    mode[moving_steered & (config == int(Mode.STRAIGHT))] = int(Mode.CAR_LIKE)
+    straight_steered = np.flatnonzero(moving_steered & (config == int(Mode.STRAIGHT)))
+    if straight_steered.size:  # car-like through alpha_v = 0 when the ICR relation holds
+        on_icr = np.abs(icr_residual(geometry, st.alpha[straight_steered])) <= settings.mode_tolerance
+        mode[straight_steered] = np.where(on_icr, int(Mode.CAR_LIKE), NO_MODE)
     mode[moving_steered & ((config == int(Mode.LATERAL)) | (config == int(Mode.ROTATION)))] = NO_MODE
     return mode
 
