@@ -39,6 +39,7 @@ class StudyCase:
     methods: tuple[tuple[str, str], ...]
     platform: dict[str, Any] | None = None
     parameters: dict[str, float] | None = None
+    options: dict[str, Any] | None = None  # further IdentificationSettings keywords
 
 
 #: Tyre stiffening of the ideal plant: creep (force / slip stiffness) a hundred times below the
@@ -73,7 +74,8 @@ def run_study_case(case: StudyCase) -> list[dict[str, Any]]:
         t0 = time.perf_counter()
         error = ""
         try:
-            ident = identify(log, geometry, settings=IdentificationSettings(estimator=estimator, uncertainty=uncertainty))
+            ident = identify(log, geometry, settings=IdentificationSettings(
+                estimator=estimator, uncertainty=uncertainty, **(case.options or {})))
         except ValueError as exc:
             ident, error = None, str(exc).splitlines()[0]
         seconds = time.perf_counter() - t0
