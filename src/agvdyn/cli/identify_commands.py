@@ -65,6 +65,13 @@ MaxInflationOpt = Annotated[float, typer.Option(
 MaxRelativeStdOpt = Annotated[float, typer.Option(
     help="Refuse parameters whose std exceeds this fraction of the value (inf: no check).")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON.")]
+EstimatorOpt = Annotated[str, typer.Option(
+    help="ols (the paper's eq. 25), wls (weights per generalized coordinate), robust (IRLS, outliers such as "
+         "slip down-weighted), bounded (masses, inertias > 0, frictions >= 0).")]
+UncertaintyOpt = Annotated[str, typer.Option(
+    help="classic (eq. 25, iid rows), hac (Newey-West for correlated residuals) or bootstrap (moving blocks).")]
+BandwidthOpt = Annotated[Optional[int], typer.Option(
+    help="HAC bandwidth / bootstrap block in samples; default: twice the residuals' correlation time, at least 50.")]
 
 
 def _fixed(items: Optional[list[str]]) -> dict[str, float]:
@@ -90,7 +97,8 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
               steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
-              slip_threshold: Optional[float] = None) -> IdentificationSettings:
+              slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = "hac",
+              bandwidth: Optional[int] = None) -> IdentificationSettings:
     try:
         mode = Filtering(filtering)
     except ValueError:
@@ -100,7 +108,7 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
             filter=FilterSettings(cutoff=cutoff, order=order), filtering=mode,
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
             stiction_guard=guard, max_inflation=max_inflation, max_relative_std=max_relative_std,
-            slip_threshold=slip_threshold,
+            slip_threshold=slip_threshold, estimator=estimator, uncertainty=uncertainty, bandwidth=bandwidth,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
         raise fail(str(exc)) from exc
@@ -125,15 +133,25 @@ def _load(paths: list[Path], mapping: Optional[Path], platform: Optional[Path]):
 
 
 def _parameter_table(ident) -> Table:
-    table = Table(title=f"Identified parameters (cond(Theta_1w^T Theta_1w) = {ident.condition_number:.4g}, "
-                        f"{ident.n_rows} rows)")
-    for col in ("parameter", "value", "std", "unit", "Table 2", "deviation"):
+    unc = ident.uncertainty.get("method", "classic")
+    table = Table(title=f"Identified parameters ({ident.estimator}, std by {unc}; cond(Theta_1w^T Theta_1w) = "
+                        f"{ident.condition_number:.4g}, {ident.n_rows:,} rows)")
+    paper = ident.geometry.same_shape(PROTOTYPE)  # Table 2 belongs to the paper's prototype only
+    columns = ["parameter", "value", "std", "95 % interval", "std eq. 25", "unit"] + (["Table 2", "deviation"] if paper else [])
+    for col in columns:
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     for name in PARAMETER_NAMES:
         value = getattr(ident.parameters, name)
-        ref = getattr(PAPER_PARAMETERS, name)
-        std = "fixed" if name in ident.fixed else f"{ident.std[name]:.4g}"
-        table.add_row(name, f"{value:.6g}", std, PARAMETER_UNITS[name], f"{ref:.6g}", f"{100 * (value / ref - 1):+.2f} %")
+        if name in ident.fixed:
+            cells = [name, f"{value:.6g}", "fixed", "", "", PARAMETER_UNITS[name]]
+        else:
+            low, high = ident.ci95(name)
+            cells = [name, f"{value:.6g}", f"{ident.std[name]:.3g}", f"{low:.5g} .. {high:.5g}",
+                     f"{ident.std_classic.get(name, math.nan):.3g}", PARAMETER_UNITS[name]]
+        if paper:
+            ref = getattr(PAPER_PARAMETERS, name)
+            cells += [f"{ref:.6g}", f"{100 * (value / ref - 1):+.2f} %"]
+        table.add_row(*cells)
     return table
 
 
@@ -155,6 +173,9 @@ def identify(
     max_inflation: MaxInflationOpt = 100.0,
     max_relative_std: MaxRelativeStdOpt = 0.5,
     slip_threshold: SlipThresholdOpt = None,
+    estimator: EstimatorOpt = "wls",
+    uncertainty: UncertaintyOpt = "hac",
+    bandwidth: BandwidthOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
@@ -163,7 +184,7 @@ def identify(
     """
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold)
+                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
     loaded, geometry = _load(logs, mapping, platform)
     ident = _identified(loaded, geometry, fixed, settings)
     try:
