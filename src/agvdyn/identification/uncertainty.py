@@ -25,6 +25,7 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
+import scipy.fft
 
 from agvdyn.identification.estimators import Estimator
 
@@ -82,16 +83,21 @@ def _add_rows(dense: np.ndarray, idx: np.ndarray, values: np.ndarray) -> None:
         dense[:, j] += np.bincount(idx, weights=values[:, j], minlength=dense.shape[0])
 
 
-def correlation_time(series: list[np.ndarray], *, window: float = 5.0) -> np.ndarray:
+def correlation_time(series: list[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 17) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
-    ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M))."""
+    ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
+
+    Each recording contributes at most its first ``max_steps`` steps (the correlation times are
+    tens to hundreds of steps): the cost does not grow with the length of the log.
+    """
     p = series[0].shape[1]
     acf = None
     for x in series:
+        x = x[:max_steps]
         n = x.shape[0]
-        size = 1 << int(math.ceil(math.log2(2 * n)))
-        f = np.fft.rfft(x, size, axis=0)
-        c = np.fft.irfft(f * np.conj(f), size, axis=0)[:n]
+        size = scipy.fft.next_fast_len(2 * n, real=True)
+        f = scipy.fft.rfft(x, size, axis=0, workers=-1)
+        c = scipy.fft.irfft(f * np.conj(f), size, axis=0, workers=-1)[:n]
         acf = c if acf is None else _pad_add(acf, c)
     rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
     tau = np.ones(p)
