@@ -199,3 +199,27 @@ def test_inspect_is_the_preflight_check(run, tmp_path):
     data = json.loads(runner.invoke(app, ["inspect", str(full), str(partial), "--json"]).output)
     assert len(data["files"]) == 2 and data["ready"]
     assert data["files"][1]["gaps"]  # the cut-out rotation leaves a dropout
+
+
+def test_steering_noise_past_the_lateral_stops_is_clipped_and_counted():
+    """Mode 3 runs at the stops +-pi/2; encoder noise of 0.1 mrad puts samples past them."""
+    from agvdyn.io import read_log, write_log
+    from agvdyn.validation import validate
+
+    result = simulate("lateral", settings=SimulationSettings(plant=PlantSettings().ideal()), seed=3)
+    frame = result.log_frame()
+    rng = np.random.default_rng(0)
+    for col in ("alpha_l", "alpha_r"):
+        frame[col] = frame[col] + 1e-4 * rng.standard_normal(len(frame))
+    beyond = int((np.abs(frame[["alpha_l", "alpha_r"]].to_numpy()) > np.pi / 2).sum())
+    assert beyond > 100
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = write_log(Path(tmp) / "lateral.parquet", frame, result.sidecar())
+        before = path.read_bytes()
+        log = read_log(path)
+        assert sum(log.clipped.values()) == beyond and path.read_bytes() == before
+        val = validate(log, result.plant_params)
+        assert val.nrmse_moving["lateral:y_ch"] < 0.1
