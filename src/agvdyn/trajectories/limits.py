@@ -1,0 +1,122 @@
+"""Limits a planned trajectory must respect, and the floor space it occupies (sec. 6.2)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agvdyn.platform import PAPER_PARAMETERS, Parameters
+from agvdyn.trajectories.errors import LimitError, TrajectoryError
+from agvdyn.trajectories.segments import Trajectory
+
+__all__ = ["Limits", "LimitReport", "limit_report", "check_limits", "FloorSpace", "floor_space"]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Limits a planned trajectory must respect (checked by :func:`check_limits`).
+
+    Velocities on the wheel side (``wheel_speed``, rad/s), chassis speed (m/s), yaw rate (rad/s),
+    steering rate (rad/s) and their accelerations; ``motor_torque`` is the motor's peak torque
+    (N m) and ``feedforward_share`` the share of it the feed-forward may use (the rest is left
+    to the feedback).
+    """
+
+    steering_rate: float = 2.0
+    steering_acceleration: float = 20.0
+    speed: float = 1.5
+    acceleration: float = 1.5
+    yaw_rate: float = 1.5
+    yaw_acceleration: float = 3.0
+    wheel_speed: float = 20.0
+    motor_torque: float = 6.0
+    feedforward_share: float = 0.8
+
+    def __post_init__(self) -> None:
+        for f in self.__dataclass_fields__:
+            if not getattr(self, f) > 0:
+                raise TrajectoryError(f"limit {f}={getattr(self, f)!r}: expected > 0")
+
+
+@dataclass(frozen=True)
+class LimitReport:
+    """Peak values of a planned trajectory next to the limits (one entry per limit name)."""
+
+    peaks: dict[str, float]
+    limits: dict[str, float]
+    worst: dict[str, tuple[str, float]]  # limit -> (segment, time)
+
+    @property
+    def ok(self) -> bool:
+        return all(self.peaks[k] <= self.limits[k] for k in self.peaks)
+
+
+def limit_report(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(), *,
+                 motion: tuple[np.ndarray, np.ndarray] | None = None, torques: np.ndarray | None = None
+                 ) -> LimitReport:
+    """Peaks of the planned velocities, accelerations and feed-forward torques (eq. 21 with ``params``).
+
+    ``motion`` = ``traj.joint_motion()`` and ``torques`` = ``traj.feedforward(params)`` when already computed.
+    """
+    qd, qdd = traj.joint_motion() if motion is None else motion
+    u = traj.feedforward(params) if torques is None else torques
+    values = {
+        "steering_rate": np.abs(qd[:, 3:5]).max(axis=1),
+        "steering_acceleration": np.abs(qdd[:, 3:5]).max(axis=1),
+        "speed": np.hypot(qd[:, 0], qd[:, 1]),
+        "acceleration": np.hypot(qdd[:, 0], qdd[:, 1]),
+        "yaw_rate": np.abs(qd[:, 2]),
+        "yaw_acceleration": np.abs(qdd[:, 2]),
+        "wheel_speed": np.abs(qd[:, 5:]).max(axis=1),
+        "motor_torque": np.abs(u).max(axis=1),
+    }
+    lim = {k: getattr(limits, k) for k in values}
+    lim["motor_torque"] = limits.motor_torque * limits.feedforward_share
+    peaks, worst = {}, {}
+    for k, v in values.items():
+        i = int(np.argmax(v))
+        peaks[k] = float(v[i])
+        worst[k] = (str(traj.segment[i]), float(traj.t[i]))
+    return LimitReport(peaks, lim, worst)
+
+
+def check_limits(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(), *,
+                 motion: tuple[np.ndarray, np.ndarray] | None = None, torques: np.ndarray | None = None
+                 ) -> LimitReport:
+    """Raise :class:`LimitError` naming the first broken limit, its segment, time and value; else the report."""
+    report = limit_report(traj, params, limits, motion=motion, torques=torques)
+    for k in report.peaks:
+        if report.peaks[k] > report.limits[k]:
+            seg, t = report.worst[k]
+            raise LimitError(
+                f"trajectory {traj.name!r} breaks the {k} limit in segment {seg!r} at t = {t:.3f} s: "
+                f"{report.peaks[k]:.4g} > {report.limits[k]:.4g}"
+            )
+    return report
+
+
+@dataclass(frozen=True)
+class FloorSpace:
+    """Rectangle occupied by an experiment (sec. 6.2): length along the straight motion, width."""
+
+    length: float
+    width: float
+
+    @property
+    def area(self) -> float:
+        return self.length * self.width
+
+
+def floor_space(traj: Trajectory) -> FloorSpace:
+    """Floor space of sec. 6.2: length ``l + 2 max |x_ch|`` and width ``sqrt(l^2 + b^2) + 2a``.
+
+    ``x_ch`` is the planned position along the chassis x axis (the longitudinal travel of every
+    segment); for a lane change (mode 2) ``2 max |y|`` of the planned path is added to the width.
+    """
+    g = traj.geometry
+    pose = traj.pose()
+    x_max = float(np.max(np.abs(pose[:, 0]))) if len(pose) else 0.0
+    y_max = float(np.max(np.abs(pose[:, 1])))
+    return FloorSpace(g.l + 2 * x_max, math.hypot(g.l, g.b) + 2 * abs(g.a) + 2 * y_max)
+
