@@ -1,12 +1,17 @@
 # Two entry points: `make demo` (end to end on the default platform) and `make test`.
+# `make cpp`: the C++ feed-forward library (cpp/), its tests, benchmark and example in build/cpp.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+CPP_BUILD := build/cpp
+JOBS ?= $(shell nproc 2>/dev/null || echo 2)
+# sources of the optional extension agvdyn.ffcpp._core that `pip install -e` builds with CMake
+EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/src/* cpp/include/agvdyn_ff/* cpp/python/*)
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean cpp
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(EXTENSION_SOURCES)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e ".[test]"
@@ -15,11 +20,21 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/python -m agvdyn.demo
 
-test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2
+# cpp first: on a fresh machine it installs the compiler that the extension of the install needs
+test: cpp $(STAMP)
+	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 $(BIN)/pip install --quiet --no-deps -e .
+	AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2
+
+# Checks (and as root on Debian/Ubuntu installs) cmake, g++, Eigen, GoogleTest; configures, builds, runs ctest.
+cpp:
+	sh cpp/tools/check_deps.sh
+	cmake -S cpp -B $(CPP_BUILD) $(if $(wildcard $(CPP_BUILD)/CMakeCache.txt),,$(if $(shell command -v ninja 2>/dev/null),-G Ninja)) -DCMAKE_BUILD_TYPE=Release
+	cmake --build $(CPP_BUILD) --parallel $(JOBS)
+	cd $(CPP_BUILD) && ctest --output-on-failure
 
 bench: $(STAMP)
 	for f in benchmarks/bench_*.py; do $(BIN)/python $$f || exit 1; done
+	if [ -x $(CPP_BUILD)/ff_bench ]; then $(CPP_BUILD)/ff_bench; else echo "ff_bench: run make cpp first"; fi
 
 clean:
 	rm -rf $(VENV) build demo_output

@@ -1,6 +1,7 @@
 """Commands ``agvdyn simulate`` and ``agvdyn feedforward`` (paper sec. 5, 6.2, 7)."""
 from __future__ import annotations
 
+from enum import Enum
 from pathlib import Path
 from typing import Optional
 
@@ -129,6 +130,13 @@ def simulate(
     typer.echo(f"wrote {path} ({result.trajectory.n_samples} samples) and {path}.yaml")
 
 
+class _Engine(str, Enum):
+    """--engine of ``agvdyn feedforward`` (agvdyn.ffcpp.ENGINES)."""
+
+    python = "python"
+    cpp = "cpp"
+
+
 @app.command()
 def feedforward(
     experiment: str = typer.Argument(..., help=_EXPERIMENT_HELP),
@@ -138,8 +146,11 @@ def feedforward(
                                             "the parameter file, else the built-in prototype."),
     no_check: bool = typer.Option(False, "--no-check", help="Write the table even if the trajectory breaks "
                                   "the velocity, acceleration or torque limits."),
+    engine: _Engine = typer.Option(_Engine.python, "--engine", help="Implementation of eq. (21): python (the "
+                                   "reference) or cpp (the C++ library of cpp/, see docs/cpp.md); equal to 1e-9."),
 ) -> None:
     """Write the planned trajectory with its feed-forward motor torques of eq. (21), one row per 2 ms."""
+    from agvdyn.ffcpp import CppEngineUnavailable
     from agvdyn.simulation import feedforward_table
     from agvdyn.trajectories import Limits, TrajectoryError
 
@@ -149,8 +160,9 @@ def feedforward(
         typer.secho(f"warning: {warning}", fg=typer.colors.YELLOW, err=True)
     _output(out)
     try:
-        table = feedforward_table(experiment, content.parameters, geom, limits=None if no_check else Limits())
-    except (TrajectoryError, ValueError) as exc:
+        table = feedforward_table(experiment, content.parameters, geom, limits=None if no_check else Limits(),
+                                  engine=engine.value)
+    except (TrajectoryError, ValueError, CppEngineUnavailable) as exc:
         raise fail(str(exc)) from exc
     if out.suffix.lower() == ".csv":
         write_atomically(out, lambda tmp: table.to_csv(tmp, index=False))

@@ -410,17 +410,22 @@ def simulate(
 
 def feedforward_table(experiment: str | os.PathLike | Trajectory, params: Parameters = PAPER_PARAMETERS,
                       platform: Geometry = PROTOTYPE, *, sample_time: float = SAMPLE_TIME,
-                      limits: Limits | None = Limits()) -> pd.DataFrame:
+                      limits: Limits | None = Limits(), engine: str = "python") -> pd.DataFrame:
     """Planned trajectory with its feed-forward motor torques of eq. (21), one row per sample.
 
     Columns: t, segment, mode (label), alpha_l, alpha_r, the planned q_dot (v_x, v_y, omega,
     alpha_l_dot, alpha_r_dot, beta_*_dot), planned wheel angles beta_*, and m_fl..m_rr (N m, motor side).
     A trajectory that breaks ``limits`` raises LimitError (``limits=None``: no check).
+    ``engine``: ``"python"`` (the reference, :func:`agvdyn.dynamics.feedforward_torques`) or ``"cpp"``
+    (the C++ library through :mod:`agvdyn.ffcpp`; CppEngineUnavailable when it was not built).
     """
+    from agvdyn.ffcpp import check_engine, trajectory_feedforward
+
+    check_engine(engine)
     traj = _trajectory(experiment, platform, sample_time)
     motion = traj.joint_motion()
     q_dot = motion[0]
-    u = traj.feedforward(params)
+    u = traj.feedforward(params) if engine == "python" else trajectory_feedforward(traj, params)
     if limits is not None:
         check_limits(traj, params, limits, motion=motion, torques=u)
     beta = traj.wheel_angles(q_dot)

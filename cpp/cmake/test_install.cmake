@@ -1,0 +1,22 @@
+# ctest "install_and_find_package": install the library into a scratch prefix, then configure and
+# build the standalone example project (examples/CMakeLists.txt) against it with find_package.
+set(prefix "${BUILD_DIR}/_install_test/prefix")
+set(consumer "${BUILD_DIR}/_install_test/consumer")
+file(REMOVE_RECURSE "${BUILD_DIR}/_install_test")
+execute_process(COMMAND "${CMAKE_COMMAND}" --install "${BUILD_DIR}" --prefix "${prefix}" RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "cmake --install failed (${rc})")
+endif()
+execute_process(COMMAND "${CMAKE_COMMAND}" -S "${EXAMPLES_DIR}" -B "${consumer}" -G "${GENERATOR}"
+                        "-DCMAKE_PREFIX_PATH=${prefix}" -DCMAKE_BUILD_TYPE=Release RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "configuring the example against the installed agvdyn_ff failed (${rc})")
+endif()
+execute_process(COMMAND "${CMAKE_COMMAND}" --build "${consumer}" RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "building the example against the installed agvdyn_ff failed (${rc})")
+endif()
+if(NOT EXISTS "${consumer}/control_loop")
+  message(FATAL_ERROR "no ${consumer}/control_loop after the build")
+endif()
+message(STATUS "find_package(agvdyn_ff) from ${prefix}: example built")

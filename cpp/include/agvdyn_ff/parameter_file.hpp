@@ -1,0 +1,32 @@
+// Parameter and platform files of agvdyn (shared/PLATFORM.md "Files"), read once at start-up.
+//
+// A parameter file is what `agvdyn identify` writes (agvdyn.platform.write_parameters), YAML or
+// JSON: `parameters: {C_l: {value: ..., std: ...}, ...}` and, when known, the vehicle
+// `platform: {name, l, b, a, r, i_G}`. Like agvdyn.platform.read_parameters, the flat forms
+// `{C_l: {value: ...}, ...}` and `{C_l: 0.33, ...}` are accepted too.
+#pragma once
+
+#include "agvdyn_ff/feedforward.hpp"
+
+#include <string>
+
+namespace agvdyn::ff {
+
+struct ParameterFile {
+  Parameters parameters;
+  bool has_platform = false;   ///< the file names its vehicle (key `platform`)
+  Geometry platform;           ///< that vehicle; the prototype's geometry when has_platform is false
+  std::string platform_name;
+};
+
+/// Read a parameter file (YAML or JSON). False with a message naming the file and the key.
+bool read_parameter_file(const std::string& path, ParameterFile* out, std::string* error);
+
+/// The same from the text of a file; `source` names it in messages.
+bool parse_parameter_file(const std::string& text, const std::string& source, ParameterFile* out,
+                          std::string* error);
+
+/// Read a platform file (YAML: l, b, a, r, i_G in SI units, optional name).
+bool read_platform_file(const std::string& path, Geometry* out, std::string* name, std::string* error);
+
+}  // namespace agvdyn::ff

@@ -1,0 +1,301 @@
+"""The C++ feed-forward (cpp/, agvdyn.ffcpp) against the Python reference (agvdyn.dynamics).
+
+Shared test vectors (cpp/tests/vectors.json, STYLE.md rule 9) are current and met by the extension;
+``agvdyn feedforward --engine cpp`` equals ``--engine python`` to 1e-9 relative on the built-in
+experiments and on a trajectory file; both engines refuse the same inputs; the C++ reader reads the
+parameter files agvdyn writes; ``import agvdyn`` never needs the extension.
+
+Without the extension these tests are skipped, unless AGVDYN_REQUIRE_CPP=1 (set by ``make test``).
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+import agvdyn.cli  # noqa: F401  (registers the commands)
+from agvdyn import ffcpp
+from agvdyn.cli._app import app
+from agvdyn.dynamics import feedforward_torques
+from agvdyn.kinematics import Mode, joint_motion
+from agvdyn.platform import (
+    PAPER_PARAMETERS,
+    PAPER_STD,
+    PROTOTYPE,
+    Geometry,
+    ParameterFile,
+    Parameters,
+    read_parameters,
+    write_parameters,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+VECTORS = ROOT / "cpp" / "tests" / "vectors.json"
+TORQUES = ["m_fl", "m_rl", "m_fr", "m_rr"]
+RELATIVE = 1e-9
+runner = CliRunner()
+
+if not ffcpp.available():
+    if os.environ.get("AGVDYN_REQUIRE_CPP") == "1":
+        raise RuntimeError(f"AGVDYN_REQUIRE_CPP=1 but {ffcpp.__name__}._core is missing: reinstall with `pip install -e .`")
+    pytest.skip("the C++ extension agvdyn.ffcpp._core is not built", allow_module_level=True)
+
+
+def _load_generator():
+    spec = importlib.util.spec_from_file_location("make_vectors", ROOT / "cpp" / "tests" / "make_vectors.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def vectors() -> dict:
+    return json.loads(VECTORS.read_text(encoding="utf-8"))
+
+
+def _models(vectors):
+    return [(Geometry(**m["geometry"], name=m["name"]), Parameters(**m["parameters"])) for m in vectors["models"]]
+
+
+def _close(actual: np.ndarray, reference: np.ndarray, relative: float, absolute: float) -> float:
+    """Largest deviation relative to the row's largest reference value; asserts the vectors' rule per row."""
+    actual, reference = np.atleast_2d(actual), np.atleast_2d(reference)
+    scale = np.abs(reference).max(axis=1)
+    dev = np.abs(actual - reference).max(axis=1)
+    bad = dev > relative * scale + absolute
+    assert not bad.any(), (f"row {int(np.argmax(bad))}: {actual[bad][0]} vs {reference[bad][0]} "
+                           f"(deviation {dev[bad][0]:.3g})")
+    return float(np.max(dev / np.where(scale > 0, scale, 1.0)))
+
+
+def test_vectors_file_is_current():
+    """The committed vectors are what cpp/tests/make_vectors.py computes with the Python model now."""
+    fresh = json.loads(json.dumps(_load_generator().vectors()))  # NaN/inf as the file writes them
+    stored = json.loads(VECTORS.read_text(encoding="utf-8"))
+    assert stored["models"] == fresh["models"] and stored["settings"] == fresh["settings"]
+    assert len(stored["cases"]) == len(fresh["cases"]) >= 200
+    for old, new in zip(stored["cases"], fresh["cases"]):
+        assert (old["model"], old["mode"]) == (new["model"], new["mode"])
+        for key in ("alpha", "s_dot", "s_ddot", "q_dot", "q_ddot", "u"):
+            np.testing.assert_allclose(old[key], new[key], rtol=1e-12, atol=1e-14,
+                                       err_msg=f"{key}: regenerate with `.venv/bin/python cpp/tests/make_vectors.py`")
+    assert [(c["mode"], c["status"]) for c in stored["invalid"]] == [(c["mode"], c["status"]) for c in fresh["invalid"]]
+
+
+def test_extension_meets_the_vectors(vectors):
+    tol = vectors["tolerance"]
+    models = _models(vectors)
+    worst = 0.0
+    for (index, label), group in pd.DataFrame(vectors["cases"]).groupby(["model", "mode"]):
+        geom, params = models[index]
+        alpha, s_dot, s_ddot = (np.array(group[k].tolist()) for k in ("alpha", "s_dot", "s_ddot"))
+        u = ffcpp.feedforward_torques(geom, params, label, alpha, s_dot, s_ddot)
+        worst = max(worst, _close(u, np.array(group["u"].tolist()), tol["relative"], tol["absolute"]))
+        q_dot, q_ddot = ffcpp.joint_motion(geom, label, alpha, s_dot, s_ddot)
+        _close(q_dot, np.array(group["q_dot"].tolist()), tol["relative"], tol["absolute"])
+        _close(q_ddot, np.array(group["q_ddot"].tolist()), tol["relative"], tol["absolute"])
+    assert worst < 1e-12  # round-off: both evaluate the same formulas
+
+
+@pytest.mark.parametrize("index", range(11))
+def test_both_engines_refuse_the_same_inputs(vectors, index):
+    case = vectors["invalid"][index]
+    geom, params = _models(vectors)[case["model"]]
+    args = (geom, params, case["mode"], np.array([case["alpha"]]), np.array([case["s_dot"]]), np.array([case["s_ddot"]]))
+    with pytest.raises(ValueError):
+        feedforward_torques(*args)
+    with pytest.raises(ValueError) as cpp_error:
+        ffcpp.feedforward_torques(*args)
+    message = str(cpp_error.value)
+    if case["status"] == "non_finite_input" and not np.isfinite(case["alpha"]).all():
+        return  # refused while checking the inputs in Python, before the C++ call
+    assert case["status"] in message or "expected finite" in message, message
+
+
+def test_random_configurations_agree_with_the_reference():
+    """Beyond the stored vectors: many random configurations on the prototype, every mode."""
+    from conftest import configurations
+
+    rng = np.random.default_rng(5)
+    for mode in Mode:
+        alpha = configurations(PROTOTYPE, mode, 2000, rng)
+        s_dot = rng.uniform(-1, 1, (2000, mode.dof))
+        s_ddot = rng.uniform(-2, 2, (2000, mode.dof))
+        reference = feedforward_torques(PROTOTYPE, PAPER_PARAMETERS, mode, alpha, s_dot, s_ddot)
+        u = ffcpp.feedforward_torques(PROTOTYPE, PAPER_PARAMETERS, mode, alpha, s_dot, s_ddot)
+        _close(u, reference, RELATIVE, 1e-12)
+        q_ref = joint_motion(PROTOTYPE, mode, alpha, s_dot, s_ddot)
+        for mine, ref in zip(ffcpp.joint_motion(PROTOTYPE, mode, alpha, s_dot, s_ddot), q_ref):
+            _close(mine, ref, RELATIVE, 1e-12)
+
+
+# --- the command line: --engine cpp equals --engine python ------------------------------------------------
+
+def _trajectory_csv(path: Path) -> Path:
+    """A trajectory file (docs/simulation.md CSV format) through modes 2, 1, 3, 1, 4, 1, sampled at 20 ms."""
+    from agvdyn.trajectories import identification_sequence, lane_change, lateral_experiment
+
+    segments = [*lane_change(speed=0.6, offset=0.8, length=5.0).segments, *lateral_experiment().segments,
+                *identification_sequence().segments[6:9]]
+    frames, t0 = [], 0.0
+    for seg in segments:
+        idx = np.arange(0, seg.n_samples, 10)
+        frame = pd.DataFrame({"t": t0 + seg.t[idx], "mode": seg.mode.label, "alpha_l": seg.alpha[idx, 0],
+                              "alpha_r": seg.alpha[idx, 1], "x_ch": 0.0, "y_ch": 0.0, "gamma_ch": 0.0})
+        column = {Mode.CAR_LIKE: ("x_ch", 1), Mode.STRAIGHT: ("x_ch", 0), Mode.LATERAL: ("y_ch", 0),
+                  Mode.ROTATION: ("gamma_ch", 0)}.get(seg.mode)
+        if column is not None:
+            frame[column[0]] = seg.s[idx, column[1]]
+        frames.append(frame)
+        t0 = float(frame["t"].iloc[-1]) + 0.02
+    pd.concat(frames).to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def params_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cpp") / "params.yaml"
+    write_parameters(path, ParameterFile(PAPER_PARAMETERS.replace(m_ch=910.0, d_cw=4.4), geometry=PROTOTYPE))
+    return path
+
+
+def _table(tmp_path: Path, experiment: str, params: Path, engine: str) -> pd.DataFrame:
+    out = tmp_path / f"ff_{engine}.parquet"
+    result = runner.invoke(app, ["feedforward", experiment, "--params", str(params), "--out", str(out),
+                                 "--engine", engine])
+    assert result.exit_code == 0, result.output
+    return pd.read_parquet(out)
+
+
+@pytest.mark.parametrize("experiment", ["identification", "lane-change", "lateral", "trajectory-file"])
+def test_cli_engines_agree(tmp_path, params_file, experiment):
+    if experiment == "trajectory-file":
+        experiment = str(_trajectory_csv(tmp_path / "trajectory.csv"))
+    python = _table(tmp_path, experiment, params_file, "python")
+    cpp = _table(tmp_path, experiment, params_file, "cpp")
+    pd.testing.assert_frame_equal(python.drop(columns=TORQUES), cpp.drop(columns=TORQUES))
+    _close(cpp[TORQUES].to_numpy(), python[TORQUES].to_numpy(), RELATIVE, 1e-12)
+    assert set(python["mode"]) >= ({"1", "2s", "4"} if "identification" in experiment else {"1"} if "lateral" in
+                                   experiment else set())
+
+
+def test_cli_names_a_missing_extension(tmp_path, params_file, monkeypatch):
+    def missing():
+        raise ffcpp.CppEngineUnavailable("the C++ feed-forward engine is not available: test")
+
+    monkeypatch.setattr(ffcpp, "extension", missing)
+    result = runner.invoke(app, ["feedforward", "lateral", "--params", str(params_file), "--out",
+                                 str(tmp_path / "ff.csv"), "--engine", "cpp"])
+    assert result.exit_code == 2
+    assert "error: the C++ feed-forward engine is not available" in result.stderr
+    assert not (tmp_path / "ff.csv").exists()
+
+
+def test_missing_module_is_a_named_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "agvdyn.ffcpp._core", None)  # import fails as if never built
+    monkeypatch.delattr(ffcpp, "_core", raising=False)
+    with pytest.raises(ffcpp.CppEngineUnavailable, match=r"pip install -e \.") as info:
+        ffcpp.extension()
+    assert isinstance(info.value, ImportError)
+    assert not ffcpp.available()
+
+
+def test_engine_choice_is_checked():
+    from agvdyn.simulation import feedforward_table
+
+    with pytest.raises(ValueError, match=r"engine='rust': expected one of \['python', 'cpp'\]"):
+        feedforward_table("lateral", engine="rust")
+
+
+def test_import_does_not_need_the_extension():
+    code = ("import sys; import agvdyn, agvdyn.cli, agvdyn.simulation, agvdyn.ffcpp; "
+            "assert 'agvdyn.ffcpp._core' not in sys.modules, 'imported eagerly'")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+# --- parameter files: the C++ reader reads what agvdyn writes ---------------------------------------------
+
+def _identify_like(geometry: Geometry | None) -> ParameterFile:
+    """A parameter file with the extras `agvdyn identify` writes (nested mappings, lists of mappings,
+    long strings, None, empty collections)."""
+    extra = {
+        "condition_number_unscaled": 1234.5,
+        "residual_rms": {"alpha_l": 0.12, "x_ch": 3.4},
+        "n_rows": 12000,
+        "estimator": "wls",
+        "settings": {"cutoff": 40.0, "segments": None, "modes": ["1", "2s", "4"],
+                     "note": "a long explanation " * 8 + "that PyYAML folds: with a colon # and a hash"},
+        "sources": ["/data/run 1.parquet", "C:\\logs\\run #2.parquet", "it's quoted"],
+        "torque_offsets": {},
+        "slip_events": [{"t_start": 1.5, "t_end": 1.75, "wheels": ["fl", "rl"]}, {"t_start": 3.0, "t_end": 3.1,
+                                                                                   "wheels": []}],
+        "warnings": [],
+    }
+    params = Parameters.from_vector(PAPER_PARAMETERS.to_vector() * np.linspace(0.9, 1.1, 11) + 1e-13)
+    return ParameterFile(params, dict(PAPER_STD), ("B_w",), 11.56, extra, geometry=geometry)
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".json"])
+@pytest.mark.parametrize("geometry", [PROTOTYPE, Geometry(l=1.0, b=0.7, a=-0.04, r=0.09, i_G=20.0, name="small: b"), None])
+def test_cpp_reader_reads_what_agvdyn_writes(tmp_path, suffix, geometry):
+    path = write_parameters(tmp_path / f"params{suffix}", _identify_like(geometry))
+    python = read_parameters(path)
+    cpp = ffcpp.read_parameter_file(path)
+    assert cpp["parameters"] == python.parameters.to_dict()  # exact: both parse the shortest repr
+    if geometry is None:
+        assert cpp["platform"] is None
+    else:
+        assert cpp["platform"] == geometry.to_dict()
+
+
+def test_cpp_reader_reads_the_flat_forms(tmp_path):
+    flat = tmp_path / "flat.yaml"
+    flat.write_text("# hand-written\n" + "".join(f"{k}: {v!r}\n" for k, v in PAPER_PARAMETERS.to_dict().items()))
+    assert ffcpp.read_parameter_file(flat)["parameters"] == read_parameters(flat).parameters.to_dict()
+    nested = tmp_path / "nested.json"
+    nested.write_text(json.dumps({k: {"value": v} for k, v in PAPER_PARAMETERS.to_dict().items()}))
+    assert ffcpp.read_parameter_file(nested)["parameters"] == PAPER_PARAMETERS.to_dict()
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("parameters:\n  C_l: {value: 1.0}\n", "missing parameters [d_vl, d_cl"),
+    ("parameters: [1, 2]\n", "'parameters' must be a mapping"),
+    ("- 1\n", "expected a mapping at the top level"),
+    ("{\"C_l\": ", "line 1"),
+])
+def test_cpp_reader_names_the_problem(tmp_path, text, message):
+    path = tmp_path / ("bad.json" if text.startswith("{") else "bad.yaml")
+    path.write_text(text)
+    with pytest.raises(ValueError) as info:
+        ffcpp.read_parameter_file(path)
+    assert str(info.value).startswith(str(path)) and message in str(info.value)
+
+
+# --- the example control loop (built by `make cpp`, which `make test` runs first) -------------------------
+
+CONTROL_LOOP = ROOT / "build" / "cpp" / "control_loop"
+
+
+@pytest.mark.skipif(not CONTROL_LOOP.exists(), reason="build/cpp/control_loop not built (make cpp)")
+def test_example_control_loop_reproduces_a_feedforward_table(tmp_path, params_file):
+    table = tmp_path / "lane.csv"
+    result = runner.invoke(app, ["feedforward", "lane-change", "--params", str(params_file), "--out", str(table)])
+    assert result.exit_code == 0, result.output
+    run = subprocess.run([str(CONTROL_LOOP), "--free-run", "--check", "1e-4", str(params_file), str(table)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    out = pd.read_csv(pd.io.common.StringIO(run.stdout))
+    reference = pd.read_csv(table)
+    assert len(out) == len(reference)
+    scale = np.abs(reference[TORQUES].to_numpy()).max()
+    assert np.abs(out[TORQUES].to_numpy() - reference[TORQUES].to_numpy()).max() < 1e-4 * scale
+    assert math.isclose(out["t"].iloc[-1], reference["t"].iloc[-1], abs_tol=1e-6)
