@@ -6,6 +6,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CPP_BUILD := build/cpp
 JOBS ?= $(shell nproc 2>/dev/null || echo 2)
+# setuptools calls the [tool.setuptools.ext-modules] table of pyproject.toml experimental at every build
+EXPERIMENTAL := 'ignore:`[tool.setuptools.ext-modules]`'
 # sources of the optional extension agvdyn.ffcpp._core that `pip install -e` builds with CMake
 EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/src/* cpp/include/agvdyn_ff/* cpp/python/*)
 
@@ -14,7 +16,7 @@ EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/sr
 $(STAMP): pyproject.toml $(EXTENSION_SOURCES)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e ".[test]"
+	PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -22,7 +24,7 @@ demo: $(STAMP)
 
 # cpp first: on a fresh machine it installs the compiler that the extension of the install needs
 test: cpp $(STAMP)
-	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 $(BIN)/pip install --quiet --no-deps -e .
+	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet --no-deps -e .
 	AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2
 
 # Checks (and as root on Debian/Ubuntu installs) cmake, g++, Eigen, GoogleTest; configures, builds, runs ctest.
