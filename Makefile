@@ -11,7 +11,7 @@ EXPERIMENTAL := 'ignore:`[tool.setuptools.ext-modules]`'
 # sources of the optional extension agvdyn.ffcpp._core that `pip install -e` builds with CMake
 EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/src/* cpp/include/agvdyn_ff/* cpp/python/*)
 
-.PHONY: demo test bench clean cpp
+.PHONY: demo test bench clean cpp browser
 
 $(STAMP): pyproject.toml $(EXTENSION_SOURCES)
 	$(PYTHON) -m venv $(VENV)
@@ -23,9 +23,16 @@ demo: $(STAMP)
 	$(BIN)/python -m agvdyn.demo
 
 # cpp first: on a fresh machine it installs the compiler that the extension of the install needs
-test: cpp $(STAMP)
+test: cpp browser $(STAMP)
 	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet --no-deps -e .
 	AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2
+
+# Headless Chromium for the report's browser test (tests/test_report_browser.py): installed with apt-get
+# when missing and running as root; otherwise nothing happens here and that test skips, saying why.
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	command -v google-chrome >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
+	(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) || true; }
 
 # Checks (and as root on Debian/Ubuntu installs) cmake, g++, Eigen, GoogleTest; configures, builds, runs ctest.
 cpp:

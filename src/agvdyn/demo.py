@@ -17,7 +17,7 @@ from agvdyn.identifiability import table1
 from agvdyn.identification import identify, load_logs
 from agvdyn.kinematics import Mode, steering_from_virtual
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
-from agvdyn.report import parameter_table, reference_parameters, write_report
+from agvdyn.report import choose_reference, parameter_table, report_of, write_report
 from agvdyn.simulation import simulate
 from agvdyn.validation import validate
 
@@ -62,22 +62,29 @@ def run_pipeline(out_dir: Path) -> Path:
     ident_logs = load_logs([logs["identification"]])
     ident = identify(ident_logs)
     params_path = ident.write(out_dir / "params.yaml")
-    reference, reference_std, label = reference_parameters(ident_logs)
-    table = parameter_table(ident, reference, reference_std)
+    reference = choose_reference(ident_logs, ident.geometry)
+    table = parameter_table(ident, reference)
+    label = reference.label if reference is not None else "no reference"
     print(f"compared with: {label}; cond(Theta_1w^T Theta_1w) = {ident.condition_number:.4g} (paper: 11.56)")
-    print(table[["value", "std", "reference", "deviation_pct", "ok"]].to_string(float_format=lambda x: f"{x:.5g}"))
+    shown = table[["value", "std", "reference", "deviation_pct"]].assign(
+        ok=[("fixed" if v is None else "yes" if v else "no") for v in table["ok"]])
+    print(shown.to_string(float_format=lambda x: f"{x:.5g}", na_rep="-"))
     print(f"-> {params_path}")
 
     _section("Validate on the lane change (car-like mode, not used for identification)")
-    val = validate(logs["lane-change"], ident.parameters)
-    print(val.table[["nrmse", "nrmse_moving", "n_rows", "n_moving"]].to_string(float_format=lambda x: f"{x:.4g}"))
+    (val_log,) = load_logs([logs["lane-change"]])
+    val = validate(val_log, ident.parameters)
+    print(val.table[["nrmse", "nrmse_moving", "n_rows", "n_moving"]].to_string(
+        float_format=lambda x: f"{x:.4g}", formatters={"n_rows": "{:,}".format, "n_moving": "{:,}".format}))
     print("nrmse: all rows; nrmse_moving: stiction rows left out (sec. 7)")
 
-    report = write_report(out_dir / "report.html", ident, val, reference=reference, reference_std=reference_std,
-                          reference_label=label,
-                          inputs={"identification log": str(logs["identification"]),
-                                  "validation log": str(logs["lane-change"]), "parameters": str(params_path)})
-    return report
+    report = report_of(ident, val, reference=reference, logs=ident_logs, validation_logs=[val_log],
+                       command="make demo (python -m agvdyn.demo)")
+    _section(f"Verdict: {report.verdict.outcome.value}")
+    print(report.verdict.summary)
+    for reason in report.verdict.reasons:
+        print(f"  - {reason}")
+    return write_report(out_dir / "report.html", report)
 
 
 def main(argv: list[str] | None = None) -> int:

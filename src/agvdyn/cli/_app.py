@@ -10,7 +10,9 @@ from agvdyn.platform import PROTOTYPE, Geometry, PlatformFileError, read_platfor
 
 app = typer.Typer(
     name="agvdyn",
-    help="Model, simulate and identify motion-mode-changing wheeled platforms (Pucher, Gattringer, Mueller).",
+    help="Model, simulate and identify motion-mode-changing wheeled platforms (Pucher, Gattringer, Mueller).\n\n"
+         "Exit codes: 0 ok; 1 refused for data quality (identify, report, inspect --strict); 2 bad usage or "
+         "input. --json prints a command's result as JSON (keys: docs/cli.md).",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -35,6 +37,17 @@ def platform_option(path: Optional[Path]) -> Geometry:
         raise fail(f"{path}: cannot be read as a platform file: {exc}") from exc
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from agvdyn import __version__
+
+        typer.echo(f"agvdyn {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="Print the version of agvdyn and exit."),
+) -> None:
     """agvdyn: model, simulate and identify motion-mode-changing wheeled platforms."""

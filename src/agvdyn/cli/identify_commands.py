@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
@@ -39,7 +39,7 @@ _FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.1
 
 # Options shared by identify, validate and report: one declaration each, so the commands agree.
 PlatformOpt = Annotated[Optional[Path], typer.Option(
-    help="Platform file (YAML); default: the log sidecar's platform, else the prototype.")]
+    help="Platform file (YAML); default: the platform in the log's sidecar, else the built-in prototype.")]
 FixOpt = Annotated[Optional[list[str]], typer.Option("--fix", help=_FIX_HELP)]
 MappingOpt = Annotated[Optional[Path], typer.Option(help="Mapping file for logs not in our schema (tables, ROS 2 bags).")]
 FilteringOpt = Annotated[str, typer.Option(
@@ -64,7 +64,7 @@ MaxInflationOpt = Annotated[float, typer.Option(
     help="Refuse parameters whose variance inflation factor exceeds this (inf: no check).")]
 MaxRelativeStdOpt = Annotated[float, typer.Option(
     help="Refuse parameters whose std exceeds this fraction of the value (inf: no check).")]
-JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON (keys: docs/cli.md).")]
 EstimatorOpt = Annotated[str, typer.Option(
     help="ols (the paper's eq. 25), wls (weights per generalized coordinate), robust (IRLS, outliers such as "
          "slip down-weighted), bounded (masses, inertias > 0, frictions >= 0).")]
@@ -236,8 +236,8 @@ def validate(
     log: Path = typer.Argument(..., metavar="LOG", help="Validation log not used for identification (e.g. the lane change)."),
     params: Path = typer.Option(..., "--params", help="Parameter file (YAML/JSON) to validate."),
     platform: Annotated[Optional[Path], typer.Option(
-        help="Platform file (YAML); default: the platform stored in the parameter file, else the log "
-             "sidecar's, else the built-in prototype.")] = None,
+        help="Platform file (YAML); default: the platform stored in the parameter file, else the platform in "
+             "the log's sidecar, else the built-in prototype.")] = None,
     mapping: MappingOpt = None,
     filtering: FilteringOpt = "parallel",
     cutoff: CutoffOpt = 40.0,
@@ -277,17 +277,23 @@ def validate(
     for col in ("generalized coordinate", "NRMSE", "NRMSE without stiction rows", "rows", "rows moving"):
         table.add_column(col, justify="left" if col.startswith("gen") else "right")
     for key, row in val.table.iterrows():
-        table.add_row(str(key), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), str(int(row["n_rows"])),
-                      str(int(row["n_moving"])))
+        table.add_row(str(key), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), f"{int(row['n_rows']):,}",
+                      f"{int(row['n_moving']):,}")
     Console().print(table)
 
 
 @app.command()
 def report(
     ident_logs: list[Path] = typer.Option(..., "--ident", help="Identification log (repeatable)."),
-    out: Path = typer.Option(..., "--out", "-o", help="HTML report to write."),
-    validation: Optional[Path] = typer.Option(None, "--validation", help="Validation log (e.g. the lane change)."),
-    params_out: Optional[Path] = typer.Option(None, "--params-out", help="Also write the parameter file here."),
+    out: Path = typer.Option(..., "--out", "-o", help="HTML report to write (one self-contained file)."),
+    validation: Optional[Path] = typer.Option(None, "--validation", help="Validation log not used for "
+                                              "identification (e.g. the lane change)."),
+    reference: Optional[Path] = typer.Option(None, "--reference", help="Parameter file (YAML/JSON) to compare the "
+                                             "estimates with; default: the simulator's true parameters of the log "
+                                             "sidecar, else Table 2 of the paper when the platform is the built-in "
+                                             "prototype, else no comparison."),
+    params_out: Optional[Path] = typer.Option(None, "--params-out", help="Also write the parameter file here "
+                                              "(.yaml, or .json)."),
     platform: PlatformOpt = None,
     fix: FixOpt = None,
     mapping: MappingOpt = None,
@@ -302,30 +308,58 @@ def report(
     max_inflation: MaxInflationOpt = 100.0,
     max_relative_std: MaxRelativeStdOpt = 0.5,
     slip_threshold: SlipThresholdOpt = None,
+    estimator: EstimatorOpt = "wls",
+    uncertainty: UncertaintyOpt = "hac",
+    bandwidth: BandwidthOpt = None,
+    as_json: JsonOpt = False,
 ) -> None:
-    """Identify, validate and write one self-contained HTML report (Table 2, Fig. 5, Fig. 6)."""
-    from agvdyn.report import reference_parameters, write_report
-    from agvdyn.validation import validate as validate_log
+    """Identify, validate and write one self-contained HTML report: verdict, data quality, parameters,
+    correlation, residuals, Fig. 5, Fig. 6 and provenance.
+
+    Exit codes: 0 identified (with or without warnings), 1 refused (the report says why), 2 bad input.
+    """
+    from agvdyn.report import Outcome, command_line, make_report, reference_from_file, write_report
 
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold)
-    loaded, geometry = _load(ident_logs, mapping, platform)
-    ident = _identified(loaded, geometry, fixed, settings)
+                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
     try:
-        val = None
-        if validation is not None:
-            (val_log,), _ = _load([validation], mapping, platform)
-            val = validate_log(val_log, ident.parameters, geometry, settings=settings)
+        ref = None if reference is None else reference_from_file(reference)
+    except (ValueError, OSError) as exc:
+        raise fail(f"--reference {reference}: {exc}") from exc
+    loaded, geometry = _load(ident_logs, mapping, platform)
+    val_log = None if validation is None else _load([validation], mapping, platform)[0][0]
+    extra = {role: path for role, path in (("mapping", mapping), ("platform", platform), ("reference", reference))
+             if path is not None}
+    try:
+        rep = make_report(loaded, geometry, fixed=fixed, settings=settings, validation_log=val_log, reference=ref,
+                          extra_files=extra, command=command_line())
     except ValueError as exc:
         raise fail(str(exc)) from exc
-    reference, reference_std, label = reference_parameters(loaded)
-    inputs: dict[str, Any] = {"fixed": ", ".join(f"{k}={v}" for k, v in fixed.items()) or "none"}
     try:
-        if params_out is not None:
-            typer.echo(f"wrote {ident.write(params_out)}")
-        written = write_report(out, ident, val, reference=reference, reference_std=reference_std,
-                               reference_label=label, inputs=inputs)
+        written_params = None
+        if params_out is not None and rep.identification is not None:
+            written_params = rep.identification.write(params_out)
+        written = write_report(out, rep)
     except OSError as exc:
         raise fail(f"cannot write the report: {exc}") from exc
-    typer.echo(f"wrote {written}")
+    verdict = rep.verdict
+    if as_json:
+        data = rep.to_json_dict()
+        data.update(out=str(written), params_out=None if written_params is None else str(written_params))
+        typer.echo(json.dumps(data, indent=2))
+    else:
+        color = {Outcome.IDENTIFIED: typer.colors.GREEN, Outcome.WARNINGS: typer.colors.YELLOW,
+                 Outcome.REFUSED: typer.colors.RED}[verdict.outcome]
+        if verdict.outcome is Outcome.REFUSED:
+            typer.secho(f"refused: {verdict.summary}", fg=color, bold=True)
+        else:
+            typer.secho(f"verdict: {verdict.outcome.value}", fg=color, bold=True)
+            typer.echo(verdict.summary)
+        for reason in verdict.reasons:
+            typer.echo(f"  - {reason}")
+        if written_params is not None:
+            typer.echo(f"wrote {written_params}")
+        typer.echo(f"wrote {written}")
+    if verdict.outcome is Outcome.REFUSED:
+        raise typer.Exit(1)

@@ -47,7 +47,7 @@ def _print_file(console: Console, check, geom, max_rows: int) -> None:
         table.add_row(f"{m.mode.label} {m.mode.name.lower()}", f"{m.t_start:.3f}", f"{m.t_end:.3f}", f"{m.duration:.3f}")
     console.print(table)
     if len(summary.modes) > max_rows:
-        console.print(f"... {len(summary.modes) - max_rows} more runs (--max-rows, or --json for all)")
+        console.print(f"... {len(summary.modes) - max_rows:,} more runs (--max-rows, or --json for all)")
     totals = ", ".join(f"{k}: {v:.3f} s" for k, v in sorted(summary.mode_time.items()))
     console.print(f"time per mode (rows x sample time)  {totals}")
     timeline = " | ".join(f"{m} {a:.1f}-{b:.1f} s" for m, a, b in check.timeline[:max_rows])
@@ -73,7 +73,7 @@ def inspect(
     min_duration: float = typer.Option(0.05, help="Mode runs shorter than this (s) are merged into the preceding "
                                                   "run in the list (0: list every run)."),
     max_rows: int = typer.Option(40, help="Longest list of mode runs printed; the rest is counted."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON (the same content)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (keys: docs/cli.md)."),
     strict: bool = typer.Option(False, "--strict", help="Exit with code 1 when the verdict is not ready."),
 ) -> None:
     """Pre-flight check: per file duration, rate, gaps, modes next to labels, clipped stops, slip; how

@@ -42,7 +42,7 @@ def convert(
         raise fail(str(exc)) from exc
     except OSError as exc:
         raise fail(f"{out}: cannot be written: {exc}") from exc
-    typer.echo(f"wrote {written} ({log.n_samples} samples, {log.duration:.3f} s at {log.rate:.6g} Hz) and {written}.yaml")
+    typer.echo(f"wrote {written} ({log.n_samples:,} samples, {log.duration:.3f} s at {log.rate:.6g} Hz) and {written}.yaml")
     conv = log.sidecar.get("conversion", {})
     if conv.get("method"):
         typer.echo(f"resampled at {conv['rate']:g} Hz: {conv['method']}")
@@ -56,4 +56,4 @@ def convert(
     gaps = log.gaps()
     if gaps:
         listed = ", ".join(f"{a:.6g} s to {b:.6g} s" for a, b in gaps[:5]) + (f" and {len(gaps) - 5} more" if len(gaps) > 5 else "")
-        typer.echo(f"note: {len(gaps)} time gap(s) (dropouts; identification uses the {len(gaps) + 1} continuous stretches): {listed}")
+        typer.echo(f"note: {len(gaps):,} time gap(s) (dropouts; identification uses the {len(gaps) + 1:,} continuous stretches): {listed}")

@@ -24,7 +24,7 @@ def _format_row(row) -> str:
 def identifiability(
     modes: Optional[str] = typer.Option(None, help="Comma-separated modes, e.g. 1,2s,4 (1, 2, 3, 4, 2s = straight). "
                                                    "Without it: the rows of Table 1."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (keys: docs/cli.md)."),
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
     tolerance: float = typer.Option(QR_TOLERANCE, help="Relative |R_ii| below which a parameter is dependent."),
     samples: int = typer.Option(400, help="Random samples per mode."),

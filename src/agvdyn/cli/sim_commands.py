@@ -127,7 +127,7 @@ def simulate(
                           f"{int((result.slip_speed > SLIP_THRESHOLD).any(axis=1).sum())} samples above "
                           f"{SLIP_THRESHOLD} m/s "
                           "(sidecar: slip_truth)")
-    typer.echo(f"wrote {path} ({result.trajectory.n_samples} samples) and {path}.yaml")
+    typer.echo(f"wrote {path} ({result.trajectory.n_samples:,} samples) and {path}.yaml")
 
 
 class _Engine(str, Enum):
@@ -168,4 +168,4 @@ def feedforward(
         write_atomically(out, lambda tmp: table.to_csv(tmp, index=False))
     else:
         write_atomically(out, lambda tmp: table.to_parquet(tmp, index=False))
-    typer.echo(f"wrote {out} ({len(table)} rows; motor torques m_fl, m_rl, m_fr, m_rr in N m)")
+    typer.echo(f"wrote {out} ({len(table):,} rows; motor torques m_fl, m_rl, m_fr, m_rr in N m)")

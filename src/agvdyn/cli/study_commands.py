@@ -83,4 +83,4 @@ def montecarlo(
                      f"{row.rmse_over_std:.2f}", f"{100 * row.coverage:.0f} %", f"{int(row.failed)}",
                      f"{row.seconds:.2f}")
     Console().print(view)
-    typer.echo(f"wrote {out} ({len(table)} rows)")
+    typer.echo(f"wrote {out} ({len(table):,} rows)")
