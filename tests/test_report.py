@@ -305,3 +305,17 @@ def test_cli_errors_exit_2(logs, args, message):
     assert result.exit_code == 2
     assert message in result.output
     assert not (logs["root"] / "x.yaml").exists() and not (logs["root"] / "x.html").exists()
+
+
+def test_verdict_of_an_implausible_refusal_names_values_and_cause():
+    from agvdyn.identification import ImplausibleError
+    from agvdyn.identification.plausibility import Implausible
+    from agvdyn.report import verdict_of
+
+    exc = ImplausibleError([Implausible("m_ch", -48.4, 0.2)], "the right-hand motor torques m_fr, m_rr have the "
+                           "wrong sign", "likely cause: the right-hand motor torques m_fr, m_rr have the wrong sign. "
+                           "With them negated the same data give m_ch = 842.1 kg")
+    verdict = verdict_of(None, exc)
+    assert verdict.outcome is Outcome.REFUSED and verdict.exit_code == 1
+    assert "physically impossible" in verdict.summary
+    assert verdict.reasons[0].startswith("m_ch = -48.4") and "m_fr, m_rr" in verdict.reasons[1]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import math
 import os
 import platform as _platform
 import sys
@@ -20,6 +21,7 @@ from typing import Any
 
 from agvdyn.identification import (
     DEFAULT_FIXED,
+    EXCITATION,
     Identification,
     IdentificationSettings,
     ImplausibleError,
@@ -178,17 +180,37 @@ def _warnings(identification: Identification, reference: Reference | None, valid
     return reasons
 
 
+def _grouped(dependencies: Sequence[Any]) -> list[str]:
+    """Refusal reasons, one line per (what is wrong, which experiment excites it)."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for d in dependencies:
+        if math.isfinite(d.relative_std):
+            how, item = "hardly excited", f"{d.name} (std {100 * d.relative_std:.0f} % of the value)"
+        elif math.isfinite(d.inflation):
+            how, item = "nearly a combination of the others", f"{d.name} (variance inflation {d.inflation:.3g})"
+        elif not d.combination_of:
+            how, item = "not excited at all", d.name
+        else:
+            how, item = f"a combination of {', '.join(d.combination_of)}", d.name
+        excited_by = EXCITATION.get(d.name, "steering reversals in every segment")
+        groups.setdefault((how, excited_by), []).append(item)
+    return [f"{', '.join(items)}: {how}; excited by {excited_by}." for (how, excited_by), items in groups.items()]
+
+
 def _refusal_summary(exc: Exception) -> tuple[str, list[str]]:
     if isinstance(exc, UnidentifiableError):
         names = [d.name for d in exc.dependencies]
         summary = (f"No parameters: the data do not determine {', '.join(names)}. Record the experiments named "
                    "below and identify again.")
-        return summary, [d.describe() for d in exc.dependencies]
+        return summary, _grouped(exc.dependencies)
     if isinstance(exc, ImplausibleError):
         summary = "No parameters: the estimates are physically impossible, so the data or their signs are wrong."
         reasons = [i.describe() for i in exc.implausible]
-        if exc.cause:
-            reasons.append(f"likely cause: {exc.cause}")
+        detail = str(exc).strip().splitlines()[-1].strip()  # the sign diagnosis: likely cause, or what to check
+        if exc.cause and "likely cause" not in detail:
+            detail = f"likely cause: {exc.cause}"
+        if detail not in reasons:
+            reasons.append(detail)
         return summary, reasons
     return f"No parameters: {exc}", []
 
