@@ -79,7 +79,7 @@ def inspect(
     """Pre-flight check: per file duration, rate, gaps, modes next to labels, clipped stops, slip; how
     well each parameter is excited and which experiment is missing; a verdict.
 
-    Exit codes: 0 ok (with --strict: ready), 1 with --strict: not ready (a parameter not excited), 2 bad input.
+    Exit codes: 0 ok (with --strict: ready), 1 with --strict: not ready (a parameter not or weakly excited), 2 bad input.
     """
     from agvdyn.preflight import preflight
 
