@@ -224,7 +224,8 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     try:
         return _identify_loaded(logs, geometry, fixed, settings, estimator)
     except ImplausibleError as exc:
-        lenient = dataclasses.replace(settings, plausibility=False)
+        # the diagnosis compares values and residuals only: the classic covariance is enough
+        lenient = dataclasses.replace(settings, plausibility=False, uncertainty="classic")
         unchecked = _identify_loaded(logs, geometry, fixed, dataclasses.replace(lenient, max_relative_std=math.inf),
                                      estimator)
         cause, detail = diagnose_signs(
