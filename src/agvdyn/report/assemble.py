@@ -164,7 +164,8 @@ def _warnings(identification: Identification, reference: Reference | None, valid
         for name, row in table.iterrows():
             if row["ok"] is False:
                 unit = PARAMETER_UNITS[name]
-                in_std = f", {row['deviation_in_std']:.3g} std" if row["deviation_in_std"] == row["deviation_in_std"] else ""
+                sigmas = row["deviation_in_std"]
+                in_std = f", {sigmas:,.0f} std" if sigmas >= 100 else f", {sigmas:.2g} std" if sigmas == sigmas else ""
                 reasons.append(f"{name} = {row['value']:.4g} {unit} is {row['deviation_pct']:+.1f} %{in_std} away from "
                                f"the {reference.label} ({row['reference']:.4g} {unit}): more than 5 % and 3 std")
     if validation is not None:

@@ -185,7 +185,9 @@ def _quality(report: Report) -> str:
                        [[esc(e.name), esc(e.status), num(e.inflation, 3), percent(100 * e.relative_std, 2),
                          esc(e.excited_by)] for e in checked.excitation], align="llrrl",
                        row_classes=["bad" if e.status in ("weak", "not excited") else "" for e in checked.excitation]))
-    notes = list(checked.warnings) + (list(report.identification.notes) if report.identification else [])
+    notes = [f"{f.summary.path or '<log>'}: {g}" for f in checked.files for g in f.gaps]
+    notes += list(checked.warnings) + (list(report.identification.notes) if report.identification else [])
+    notes = list(dict.fromkeys(notes))  # the identification notes its cuts too
     if notes:
         parts.append("<h3>Notes</h3><ul>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>")
     parts.append("</section>")
