@@ -258,3 +258,26 @@ def test_lane_change_alone_is_refused_as_poorly_conditioned():
     named = {d.name for d in info.value.dependencies}
     assert named and named <= set(PARAMETER_NAMES) and "m_ch" not in named
     assert all(d.inflation > 100 for d in info.value.dependencies)
+
+
+@pytest.mark.parametrize("columns, cause", [
+    (("m_fr", "m_rr"), "the right-hand motor torques m_fr, m_rr have the wrong sign"),
+    (("beta_fl", "beta_rl"), "the left-hand wheel angles beta_fl, beta_rl have the wrong sign"),
+])
+def test_sign_mistakes_on_exact_data_are_named(model_data, columns, cause):
+    from agvdyn.identification import ImplausibleError, SignConventionError
+
+    frame = model_data[0].copy()
+    frame[list(columns)] *= -1
+    try:
+        identify(Log.from_frame(frame), PROTOTYPE)
+    except SignConventionError as exc:
+        assert exc.cause == cause and columns[0].startswith("beta")
+        assert "sign: -1" in str(exc)
+    except ImplausibleError as exc:
+        assert exc.cause == cause
+        assert "m_ch = 842" in str(exc)
+    except UnidentifiableError as exc:  # a sign mistake may also leave a parameter unexcited
+        pytest.fail(f"refused as unexcited instead of naming the sign: {exc}")
+    else:
+        pytest.fail("a sign mistake was accepted")

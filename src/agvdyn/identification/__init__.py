@@ -15,7 +15,7 @@ The entry point is :func:`identify`.
 """
 from agvdyn.identification.equations import EquationBlock, equation_block, generalized_velocity
 from agvdyn.identification.pipeline import fit_blocks, identify, load_logs, platform_for
-from agvdyn.identification.plausibility import ImplausibleError
+from agvdyn.identification.plausibility import ImplausibleError, SignConventionError
 from agvdyn.identification.regression import (
     Dependency,
     Estimator,
@@ -40,7 +40,7 @@ from agvdyn.identification.slip import SlipEvent
 
 __all__ = [
     "DEFAULT_FIXED", "EXCITATION", "OFFSET_NAMES", "STEERING_COORDINATES", "CHASSIS_COORDINATES",
-    "Filtering", "IdentificationSettings", "EquationBlock", "UnidentifiableError", "ImplausibleError",
+    "Filtering", "IdentificationSettings", "EquationBlock", "UnidentifiableError", "ImplausibleError", "SignConventionError",
     "Dependency", "Estimator", "LeastSquares", "Identification", "SlipEvent", "RowCounts", "LogRows",
     "equation_block", "generalized_velocity", "log_equations", "log_rows", "row_modes", "stacked_system",
     "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "load_logs", "platform_for",

@@ -12,7 +12,14 @@ import numpy as np
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import triangular_factor
 from agvdyn.identification.equations import EquationBlock
-from agvdyn.identification.plausibility import ImplausibleError, diagnose_signs, implausible_parameters, overall_rms
+from agvdyn.identification.plausibility import (
+    ImplausibleError,
+    diagnose_signs,
+    encoder_sign_candidates,
+    pick_sign_candidate,
+    implausible_parameters,
+    overall_rms,
+)
 from agvdyn.identification.regression import (
     Dependency,
     Estimator,
@@ -217,15 +224,24 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
         that would excite it).
     ImplausibleError
         A mass, inertia or friction came out negative; the message names the likely sign mistake.
+    SignConventionError
+        The encoders contradict the rolling constraints unless a sign is changed (named).
     """
     logs = load_logs(logs)
     geometry = platform_for(logs, platform)
     _check_segments_present(logs, settings)
     try:
         return _identify_loaded(logs, geometry, fixed, settings, estimator)
-    except ImplausibleError as exc:
+    except (UnidentifiableError, ImplausibleError) as exc:
         # the diagnosis compares values and residuals only: the classic covariance is enough
         lenient = dataclasses.replace(settings, plausibility=False, uncertainty="classic")
+        candidates = encoder_sign_candidates(logs, geometry, settings)  # the rolling constraints tell first
+        if candidates:
+            mistake = pick_sign_candidate(
+                logs, candidates, lambda flipped: _identify_loaded(flipped, geometry, fixed, lenient, estimator))
+            raise mistake from None
+        if isinstance(exc, UnidentifiableError):
+            raise
         unchecked = _identify_loaded(logs, geometry, fixed, dataclasses.replace(lenient, max_relative_std=math.inf),
                                      estimator)
         cause, detail = diagnose_signs(

@@ -13,12 +13,23 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 
 
 from agvdyn.platform import PARAMETER_UNITS
 
-__all__ = ["POSITIVE", "NON_NEGATIVE", "SIGN_HYPOTHESES", "Implausible", "ImplausibleError", "implausible_parameters",
-           "diagnose_signs"]
+__all__ = ["POSITIVE", "NON_NEGATIVE", "SIGN_HYPOTHESES", "Implausible", "ImplausibleError", "SignConventionError",
+           "implausible_parameters", "diagnose_signs", "encoder_sign_candidates", "pick_sign_candidate"]
+
+#: Encoder sign mistakes the rolling constraints reveal by themselves: (what, columns negated).
+ENCODER_HYPOTHESES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("the right-hand wheel angles beta_fr, beta_rr have the wrong sign", ("beta_fr", "beta_rr")),
+    ("the left-hand wheel angles beta_fl, beta_rl have the wrong sign", ("beta_fl", "beta_rl")),
+    *((f"the wheel angle beta_{w} has the wrong sign", (f"beta_{w}",)) for w in ("fl", "rl", "fr", "rr")),
+    ("the right steering angle alpha_r has the wrong sign", ("alpha_r",)),
+    ("the left steering angle alpha_l has the wrong sign", ("alpha_l",)),
+)
 
 #: Parameters that must be > 0 (masses and inertias) and >= 0 (friction), eq. (18).
 POSITIVE = ("C_l", "C_r", "m_ch", "C_ch", "B_w")
@@ -61,6 +72,67 @@ class ImplausibleError(ValueError):
         super().__init__(f"physically impossible estimates:\n  {lines}\n{detail}")
 
 
+def encoder_sign_candidates(logs: Sequence[Any], geometry: Any, settings: Any) -> list[tuple[str, tuple[str, ...], str]]:
+    """Encoder sign mistakes that make the wheels roll (eq. 1) where, as given, they slip everywhere:
+    (what, columns, detail) for each hypothesis that brings the median slip speed of the moving rows
+    below a fifth and below the slip floor. Kinematics cannot tell negating the left wheels from
+    negating the right ones (the vehicle then drives backwards): the torques decide, see
+    :func:`pick_sign_candidate`. Uses the first continuous stretch of each log."""
+    from agvdyn.identification.stretches import filtered_stretch, stretch_bounds
+
+    def median_slip(log: Any) -> float:
+        (a, b), *_ = stretch_bounds(log.t, log.alpha, log.beta, settings)[0]
+        st = filtered_stretch(geometry, log, a, b, settings)
+        moving = np.max(np.abs(st.beta_dot), axis=1) * geometry.r > 0.05
+        return float(np.median(st.slip.max(axis=1)[moving])) if moving.sum() > 50 else math.nan
+
+    out = []
+    for log in logs:
+        given = median_slip(log)
+        if not given > settings.slip_floor:
+            continue
+        for what, columns in ENCODER_HYPOTHESES:
+            fixed = median_slip(_flipped(log, columns))
+            if fixed < 0.2 * given and fixed < settings.slip_floor:
+                out.append((what, columns, f"{getattr(log, 'path', None) or '<log>'}: the wheels slip by {given:.3g} m/s "
+                                           f"(median of the moving rows) as the encoders are given, and roll "
+                                           f"({fixed:.2g} m/s) with {', '.join(columns)} negated"))
+        if out:
+            break
+    return out
+
+
+def pick_sign_candidate(logs: Sequence[Any], candidates: list[tuple[str, tuple[str, ...], str]],
+                        fit: Callable[[list[Any]], Any]) -> SignConventionError | None:
+    """The candidate under which the fit gives physically plausible parameters, as the error to raise."""
+    for what, columns, detail in candidates:
+        try:
+            ident = fit([_flipped(log, columns) for log in logs])
+        except ValueError:
+            continue
+        values = {n: getattr(ident.parameters, n) for n in (*POSITIVE, *NON_NEGATIVE) if n not in ident.fixed}
+        if not implausible_parameters(values, ident.std)[0]:
+            return SignConventionError(what, f"{detail}, and then give plausible parameters (m_ch = "
+                                             f"{ident.parameters.m_ch:.5g} kg). Fix the sign in the logger, or give "
+                                             "'sign: -1' for these signals in the mapping file (docs/io.md).")
+    if candidates:
+        what, columns, detail = candidates[0]
+        return SignConventionError(what, f"{detail} (or the same on the other side together with all motor torques: "
+                                         "the torques do not decide). Fix the sign in the logger, or give 'sign: -1' "
+                                         "for these signals in the mapping file (docs/io.md).")
+    return None
+
+
+class SignConventionError(ImplausibleError):
+    """The encoders contradict the rolling constraints unless one of them changes its sign
+    (an :class:`ImplausibleError` with no estimate: the data are refused before the fit)."""
+
+    def __init__(self, cause: str, detail: str) -> None:
+        self.implausible = ()
+        self.cause = cause
+        ValueError.__init__(self, f"likely cause: {cause}. {detail}")
+
+
 def implausible_parameters(values: dict[str, float], std: dict[str, float], *, significance: float = 3.0
                            ) -> tuple[list[Implausible], list[str]]:
     """(refused, warnings): masses/inertias <= 0 are refused; a negative friction is refused when it is
@@ -89,8 +161,11 @@ def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residua
                    ) -> tuple[str | None, str]:
     """Try each sign hypothesis on the logs; ``fit(logs) -> Identification`` (plausibility off).
 
-    Returns (cause, message): the hypothesis under which the estimate is plausible with the
-    smallest residual below ``residual`` (RMS over all generalized torques), or None.
+    Returns (cause, message): among the hypotheses under which every estimate is physically
+    plausible, the one with the smallest residual (RMS over all generalized torques; ``residual``
+    is that of the data as given, for the message), or None. A sign mistake need not raise the
+    residual much (a model with impossible parameters can fit wrong-sign data closely), so
+    plausibility decides and the residual only ranks.
     """
     best: tuple[float, str, Any] | None = None
     for what, columns in SIGN_HYPOTHESES:
@@ -101,7 +176,7 @@ def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residua
         values = {n: getattr(ident.parameters, n) for n in (*POSITIVE, *NON_NEGATIVE) if n not in ident.fixed}
         refused, _ = implausible_parameters(values, ident.std)
         rms = overall_rms(ident)
-        if not refused and rms < residual and (best is None or rms < best[0]):
+        if not refused and (best is None or rms < best[0]):
             best = (rms, what, ident)
     if best is None:
         return None, ("no single sign mistake explains it (tried: " + "; ".join(w for w, _ in SIGN_HYPOTHESES) +
@@ -110,8 +185,8 @@ def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residua
     rms, what, ident = best
     p = ident.parameters
     return what, (f"likely cause: {what}. With them negated the same data give m_ch = {p.m_ch:.5g} kg, "
-                  f"C_ch = {p.C_ch:.5g} kg m^2, d_vw = {p.d_vw:.4g} N m s/rad and a residual RMS of {rms:.4g} "
-                  f"N m instead of {residual:.4g} N m. Fix the sign in the logger, or give 'sign: -1' for these "
+                  f"C_ch = {p.C_ch:.5g} kg m^2, d_vw = {p.d_vw:.4g} N m s/rad, all physically plausible, with a "
+                  f"residual RMS of {rms:.4g} N m (as given: {residual:.4g} N m). Fix the sign in the logger, or give 'sign: -1' for these "
                   "signals in the mapping file (docs/io.md).")
 
 
