@@ -6,8 +6,6 @@ from typing import Optional
 
 import typer
 
-from agvdyn.platform import PROTOTYPE, Geometry, PlatformFileError, read_platform
-
 app = typer.Typer(
     name="agvdyn",
     help="Model, simulate and identify motion-mode-changing wheeled platforms (Pucher, Gattringer, Mueller).\n\n"
@@ -27,6 +25,8 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
 
 def platform_option(path: Optional[Path]) -> Geometry:
     """The platform of a --platform option, or the built-in prototype; a bad file is a clean error."""
+    from agvdyn.platform import PROTOTYPE, PlatformFileError, read_platform
+
     if path is None:
         return PROTOTYPE
     try:

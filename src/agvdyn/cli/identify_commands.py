@@ -11,26 +11,8 @@ from rich.console import Console
 from rich.table import Table
 
 from agvdyn.cli._app import app, fail
-from agvdyn.identification import (
-    DEFAULT_FIXED,
-    Filtering,
-    IdentificationSettings,
-    ImplausibleError,
-    UnidentifiableError,
-    identify as identify_parameters,
-    load_logs,
-    platform_for,
-)
-from agvdyn.platform import (
-    PAPER_PARAMETERS,
-    PARAMETER_NAMES,
-    PARAMETER_UNITS,
-    PROTOTYPE,
-    platform_of_parameters,
-    read_parameters,
-    read_platform,
-)
-from agvdyn.signals import FilterSettings
+
+# The library (scipy, numba) is imported inside the functions that use it: ``agvdyn --help`` stays fast.
 
 _FIX_HELP = ("Parameter taken as known, NAME=VALUE (repeatable); default B_w=0.121. '--fix none' estimates all "
              "eleven: B_w is then told from m_ch and C_ch only by car-like motion with strong wheel accelerations, "
@@ -75,6 +57,9 @@ BandwidthOpt = Annotated[Optional[int], typer.Option(
 
 
 def _fixed(items: Optional[list[str]]) -> dict[str, float]:
+    from agvdyn.identification import DEFAULT_FIXED
+    from agvdyn.platform import PARAMETER_NAMES
+
     if not items:
         return dict(DEFAULT_FIXED)
     if [i.strip().lower() for i in items] == ["none"]:
@@ -98,7 +83,10 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
               steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
               slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = "hac",
-              bandwidth: Optional[int] = None) -> IdentificationSettings:
+              bandwidth: Optional[int] = None) -> "IdentificationSettings":  # noqa: F821
+    from agvdyn.identification import Filtering, IdentificationSettings
+    from agvdyn.signals import FilterSettings
+
     try:
         mode = Filtering(filtering)
     except ValueError:
@@ -116,6 +104,8 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
 
 def _identified(logs, geometry, fixed, settings):
     """identify(), with refusals for data quality as exit code 1 and bad input as exit code 2."""
+    from agvdyn.identification import ImplausibleError, UnidentifiableError, identify as identify_parameters
+
     try:
         return identify_parameters(logs, geometry, fixed=fixed, settings=settings)
     except (UnidentifiableError, ImplausibleError) as exc:
@@ -125,6 +115,8 @@ def _identified(logs, geometry, fixed, settings):
 
 
 def _load(paths: list[Path], mapping: Optional[Path], platform: Optional[Path]):
+    from agvdyn.identification import load_logs, platform_for
+
     try:
         logs = load_logs(paths, mapping=mapping, platform=platform)
         return logs, platform_for(logs, platform)
@@ -133,6 +125,8 @@ def _load(paths: list[Path], mapping: Optional[Path], platform: Optional[Path]):
 
 
 def _parameter_table(ident) -> Table:
+    from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, PROTOTYPE
+
     unc = ident.uncertainty.get("method", "classic")
     table = Table(title=f"Identified parameters ({ident.estimator}, std by {unc}; cond(Theta_1w^T Theta_1w) = "
                         f"{ident.condition_number:.4g}, {ident.n_rows:,} rows)")
@@ -248,6 +242,7 @@ def validate(
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
+    from agvdyn.platform import PROTOTYPE, platform_of_parameters, read_parameters, read_platform
     from agvdyn.validation import validate as validate_log
 
     settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard)

@@ -9,9 +9,7 @@ from rich.table import Table
 
 from agvdyn.cli._app import app, fail
 from agvdyn.cli.identify_commands import FixOpt, MappingOpt, PlatformOpt, _fixed
-from agvdyn.identification import IdentificationSettings, load_logs, platform_for
-from agvdyn.io import STOP_TOLERANCE
-from agvdyn.kinematics import MODE_TOLERANCE
+from agvdyn.cli._defaults import MODE_TOLERANCE, STOP_TOLERANCE
 
 
 def _print_file(console: Console, check, geom, max_rows: int) -> None:
@@ -79,6 +77,7 @@ def inspect(
 
     Exit codes: 0 ok (with --strict: ready), 1 with --strict: not ready (a parameter not or weakly excited), 2 bad input.
     """
+    from agvdyn.identification import IdentificationSettings, load_logs, platform_for
     from agvdyn.preflight import preflight
 
     fixed = _fixed(fix)

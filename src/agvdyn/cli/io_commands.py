@@ -7,10 +7,7 @@ from typing import Optional
 import typer
 
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.io import STOP_TOLERANCE, LogError, MappingError, load_log, write_log
-from agvdyn.platform import PlatformFileError
-
-_LOAD_ERRORS = (LogError, MappingError, PlatformFileError)
+from agvdyn.cli._defaults import STOP_TOLERANCE
 
 
 @app.command()
@@ -25,6 +22,10 @@ def convert(
         STOP_TOLERANCE, help="rad beyond the steering stops +-pi/2 that is clipped to the stop (sensor noise); further out is an error."),
 ) -> None:
     """Convert a ROS 2 bag or a table to our log schema, so that you can look at what was understood."""
+    from agvdyn.io import LogError, MappingError, load_log, write_log
+    from agvdyn.platform import PlatformFileError
+
+    _LOAD_ERRORS = (LogError, MappingError, PlatformFileError)
     geom = platform_option(platform) if platform is not None else None
     if out.resolve() == input.resolve():
         raise fail(f"{out}: the output would overwrite the input; choose another --out")

@@ -8,8 +8,7 @@ from typing import Optional
 import typer
 
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.identifiability import QR_TOLERANCE, base_parameters, parse_modes, table1
-from agvdyn.platform import PARAMETER_NAMES
+from agvdyn.cli._defaults import QR_TOLERANCE
 
 
 def _format_row(row) -> str:
@@ -31,6 +30,9 @@ def identifiability(
     seed: int = typer.Option(0, help="Seed of the random motions."),
 ) -> None:
     """Base parameters of motion modes by QR decomposition (paper sec. 6.1, Table 1)."""
+    from agvdyn.identifiability import base_parameters, parse_modes, table1
+    from agvdyn.platform import PARAMETER_NAMES
+
     geom = platform_option(platform)
     try:
         if modes is not None:

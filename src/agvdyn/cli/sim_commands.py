@@ -12,21 +12,15 @@ from rich.table import Table
 
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.platform import (
-    PAPER_PARAMETERS,
-    SAMPLE_TIME,
-    ParameterFile,
-    PlatformFileError,
-    platform_of_parameters,
-    read_parameters,
-)
 
 _EXPERIMENT_HELP = "identification, lane-change, lateral, or a trajectory file (.csv / .yaml, see docs/simulation.md)."
 
 
-def _parameter_file(path: Path) -> ParameterFile:
+def _parameter_file(path: Path) -> "ParameterFile":  # noqa: F821
     """The contents of a --params file; a bad file (missing, a directory, not YAML/JSON, not a
     parameter file) is a named error, never a traceback."""
+    from agvdyn.platform import PlatformFileError, read_parameters
+
     try:
         return read_parameters(path)
     except PlatformFileError as exc:
@@ -35,8 +29,13 @@ def _parameter_file(path: Path) -> ParameterFile:
         raise fail(f"{path}: cannot be read as a parameter file: {exc}") from exc
 
 
-def _params(path: Optional[Path], default=PAPER_PARAMETERS):
+def _params(path: Optional[Path], default=None):
+    """The parameters of a --params file; without one, ``default`` (None: Table 2 of the paper)."""
     if path is None:
+        if default is None:
+            from agvdyn.platform import PAPER_PARAMETERS
+
+            return PAPER_PARAMETERS
         return default
     return _parameter_file(path).parameters
 
@@ -83,6 +82,7 @@ def simulate(
     """Simulate an experiment in closed loop (plant with tyre slip) and write the log the sensors record."""
     from dataclasses import replace
 
+    from agvdyn.platform import SAMPLE_TIME
     from agvdyn.simulation import SLIP_SCENARIO, SLIP_THRESHOLD, SimulationSettings, read_settings, simulate as run
     from agvdyn.trajectories import TrajectoryError
 
@@ -151,6 +151,7 @@ def feedforward(
 ) -> None:
     """Write the planned trajectory with its feed-forward motor torques of eq. (21), one row per 2 ms."""
     from agvdyn.ffcpp import CppEngineUnavailable
+    from agvdyn.platform import platform_of_parameters
     from agvdyn.simulation import feedforward_table
     from agvdyn.trajectories import Limits, TrajectoryError
 

@@ -11,8 +11,7 @@ from rich.table import Table
 
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
-from agvdyn.identification.estimators import ESTIMATORS
-from agvdyn.identification.uncertainty import UncertaintyMethod
+from agvdyn.cli._defaults import ESTIMATORS
 
 
 @app.command()
@@ -38,6 +37,7 @@ def montecarlo(
     import yaml
 
     from agvdyn.identification import IdentificationSettings
+    from agvdyn.identification.uncertainty import UncertaintyMethod
     from agvdyn.montecarlo import StudyCase, run_study, summarize
 
     if out.suffix.lower() != ".parquet":
