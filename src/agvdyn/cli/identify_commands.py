@@ -102,12 +102,12 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
         raise fail(str(exc)) from exc
 
 
-def _identified(logs, geometry, fixed, settings):
+def _identified(logs, geometry, fixed, settings, experiment: Optional[str] = None):
     """identify(), with refusals for data quality as exit code 1 and bad input as exit code 2."""
     from agvdyn.identification import ImplausibleError, UnidentifiableError, identify as identify_parameters
 
     try:
-        return identify_parameters(logs, geometry, fixed=fixed, settings=settings)
+        return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=experiment)
     except (UnidentifiableError, ImplausibleError) as exc:
         raise fail(f"refused: {exc}", code=1) from exc
     except ValueError as exc:
@@ -170,6 +170,9 @@ def identify(
     estimator: EstimatorOpt = "wls",
     uncertainty: UncertaintyOpt = "hac",
     bandwidth: BandwidthOpt = None,
+    experiment: Annotated[str, typer.Option(
+        "--experiment", help="auto (from the segment labels), vehicle, or lifted-wheel: the single-axis test "
+                             "of sec. 7 (wheels off the ground) gives B_w and the wheel friction without load.")] = "auto",
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
@@ -180,7 +183,7 @@ def identify(
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
                          max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
     loaded, geometry = _load(logs, mapping, platform)
-    ident = _identified(loaded, geometry, fixed, settings)
+    ident = _identified(loaded, geometry, fixed, settings, experiment)
     try:
         written = ident.write(out)
     except OSError as exc:
@@ -191,6 +194,14 @@ def identify(
         typer.echo(json.dumps(data, indent=2))
         return
     console = Console()
+    if getattr(ident, "experiment", None) == "lifted_wheel":  # agvdyn.identification.lifted
+        for name, entry in ident.to_json_dict()["parameters"].items():
+            console.print(f"{name} = {entry['value']:.6g} +- {entry['std']:.2g} {entry['unit']}"
+                          + (" (without load)" if name != "B_w" else ""))
+        console.print(f"lifted wheels, cond {ident.condition_number:.4g}, rows per wheel {ident.rows}; use "
+                      f"--fix B_w={ident.B_w:.6g} on the vehicle's logs")
+        console.print(f"wrote {written}")
+        return
     console.print(_parameter_table(ident))
     console.print("residual RMS per generalized torque: " +
                   ", ".join(f"{k} {v:.4g}" for k, v in ident.residual_rms.items()))

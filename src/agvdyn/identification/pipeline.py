@@ -206,8 +206,11 @@ def _correlation(cov: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
 def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
              fixed: Mapping[str, float] = DEFAULT_FIXED,
              settings: IdentificationSettings = IdentificationSettings(),
-             estimator: Estimator | None = None) -> Identification:
+             estimator: Estimator | None = None, experiment: str | None = None) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
+
+    Lifted-wheel logs (every labelled row ``lifted_wheel``, or ``experiment="lifted-wheel"``) give
+    B_w and the unloaded wheel friction instead: a :class:`~agvdyn.identification.lifted.LiftedWheelIdentification`.
 
     Parameters
     ----------
@@ -216,6 +219,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
     settings : :class:`IdentificationSettings`.
     estimator : an :class:`Estimator`, default :class:`LeastSquares`.
+    experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
 
     Raises
     ------
@@ -229,6 +233,10 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     """
     logs = load_logs(logs)
     geometry = platform_for(logs, platform)
+    from agvdyn.identification.lifted import identify_lifted, lifted_experiment
+
+    if lifted_experiment(logs, experiment):
+        return identify_lifted(logs, geometry, settings=settings, estimator=estimator)
     _check_segments_present(logs, settings)
     try:
         return _identify_loaded(logs, geometry, fixed, settings, estimator)

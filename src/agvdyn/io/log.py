@@ -34,7 +34,7 @@ TORQUE_COLUMNS = ("m_fl", "m_rl", "m_fr", "m_rr")
 SEGMENT_COLUMN = "segment"
 #: Known segment names: the identification sequence of sec. 6.2, the validation manoeuvres of
 #: sec. 7, and ``align`` for wheel alignment at rest between segments (mode 1).
-SEGMENTS = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align")
+SEGMENTS = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align", "lifted_wheel")
 #: Mechanical range of the steering angles (PLATFORM.md), rad.
 STEERING_LIMIT = math.pi / 2
 #: Default tolerance beyond the stops, rad: measured steering angles pass +-pi/2 by their noise

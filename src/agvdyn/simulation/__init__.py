@@ -169,6 +169,7 @@ class SimulationResult:
     energy: np.ndarray
     work: np.ndarray
     torque_burst: np.ndarray
+    lifted: bool = False
 
     @property
     def t(self) -> np.ndarray:
@@ -195,6 +196,8 @@ class SimulationResult:
     def slip_speed(self) -> np.ndarray:
         """True slip speed (N, 4), m/s, of each wheel's contact point: the norm of its lateral and
         longitudinal slip velocity (rows of ``A(alpha) v``, eq. 1-2, with the true rolling radii)."""
+        if self.lifted:  # no ground contact: nothing slips
+            return np.zeros((self.t.size, 4))
         return slip_speeds(self._constants, self.position, self.velocity)
 
     @cached_property
@@ -212,6 +215,8 @@ class SimulationResult:
     def odometry_pose(self) -> np.ndarray:
         """Pose (N, 3) by odometry, eq. (3), from the measured angles (central differences), as the vehicle sees it."""
         Ts = self.settings.sample_time
+        if self.lifted:  # on jacks: the chassis does not move, whatever the wheels do
+            return np.zeros((self.t.size, 3))
         a_dot = np.gradient(self.alpha_measured, Ts, axis=0)
         b_dot = np.gradient(self.beta_measured, Ts, axis=0)
         twist = odometry(self.geometry, self.alpha_measured, a_dot, b_dot)
@@ -357,6 +362,10 @@ def simulate(
     Ts = settings.sample_time
     traj = _trajectory(experiment, platform, Ts)
     ctrl_params = plant_params if controller_params is None else controller_params
+    if traj.lifted:  # the single-axis experiment of sec. 7 (lifted.py)
+        from agvdyn.simulation.lifted import simulate_lifted
+
+        return simulate_lifted(traj, platform, plant_params, ctrl_params, settings, seed, progress)
     motion = traj.joint_motion()
     q_dot_d = motion[0]
     u_ff = traj.feedforward(ctrl_params)

@@ -31,12 +31,14 @@ from agvdyn.trajectories.segments import (
 )
 from agvdyn.trajectories.limits import FloorSpace, LimitReport, Limits, check_limits, floor_space, limit_report
 from agvdyn.trajectories.experiments import (
+    EXPERIMENTS,
     default_excitation,
     default_periods,
     experiment,
     identification_sequence,
     lane_change,
     lateral_experiment,
+    lifted_wheel_experiment,
 )
 from agvdyn.trajectories.files import read_trajectory
 
@@ -44,5 +46,6 @@ __all__ = [
     "TrajectoryError", "LimitError", "FourierSeries", "CONTINUITY_TOLERANCE", "SEGMENT_NAMES", "Segment",
     "Trajectory", "alignment", "fourier_segment", "pose_from_velocities", "FloorSpace", "LimitReport", "Limits",
     "check_limits", "floor_space", "limit_report", "default_excitation", "default_periods", "experiment",
-    "identification_sequence", "lane_change", "lateral_experiment", "read_trajectory",
+    "identification_sequence", "lane_change", "lateral_experiment", "lifted_wheel_experiment", "EXPERIMENTS",
+    "read_trajectory",
 ]

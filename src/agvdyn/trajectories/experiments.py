@@ -1,5 +1,6 @@
 """Built-in experiments: the identification sequence of sec. 6.2 with its default excitation, the
-lane change of sec. 7 (validation), the lateral experiment, and :func:`experiment` by name."""
+lane change of sec. 7 (validation), the lateral experiment, the lifted-wheel (single-axis) test of
+sec. 7, and :func:`experiment` by name."""
 from __future__ import annotations
 
 import math
@@ -23,7 +24,10 @@ from agvdyn.trajectories.segments import (
 )
 
 __all__ = ["default_excitation", "default_periods", "identification_sequence", "lateral_experiment", "lane_change",
-           "experiment"]
+           "lifted_wheel_experiment", "experiment", "EXPERIMENTS"]
+
+#: Names of the built-in experiments of :func:`experiment`.
+EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel")
 
 
 # Steering: 6 harmonics of 8 s (0.8-4.7 rad/s), three periods, so that C_l alpha_ddot is not
@@ -65,29 +69,32 @@ def _zero_series(like: FourierSeries) -> FourierSeries:
 def identification_sequence(geom: Geometry = PROTOTYPE, *, steer_left: FourierSeries | None = None,
                             steer_right: FourierSeries | None = None, straight: FourierSeries | None = None,
                             rotation: FourierSeries | None = None, steering_periods: int | None = None,
-                            pause: float = 0.5, dt: float = SAMPLE_TIME) -> Trajectory:
+                            pause: float = 0.5, dt: float = SAMPLE_TIME, align_rate: float = 0.8,
+                            align_acceleration: float = 2.0) -> Trajectory:
     """Identification sequence of sec. 6.2: steer_left, steer_right, straight, rotation.
 
     Mode 1 with one side held at zero, straight motion (mode 2, alpha_v = 0), pure rotation
     (mode 4), with ``align`` segments at rest between them (a ``pause`` when the wheels need not
     turn; before the rotation the wheels turn to arctan(l/b) (-1, 1) and back to zero after it).
     The steering series run ``steering_periods`` periods (default: 3 with the default series, else 1).
+    ``align_rate``, ``align_acceleration``: peak steering rate and acceleration of the alignments.
     """
     periods = steering_periods or (default_periods("steer_left") if steer_left is None and steer_right is None else 1)
     sl = steer_left or default_excitation("steer_left")
     sr = steer_right or default_excitation("steer_right")
     zero2 = np.zeros(2)
     rot = nominal_steering(geom, Mode.ROTATION)
+    kw = dict(pause=pause, dt=dt, rate=align_rate, acceleration=align_acceleration)
     segs = [
-        alignment(zero2, zero2, pause=pause, dt=dt),
+        alignment(zero2, zero2, **kw),
         fourier_segment("steer_left", Mode.PARKING, (sl, _zero_series(sl)), periods=periods, geom=geom, dt=dt),
-        alignment(zero2, zero2, pause=pause, dt=dt),
+        alignment(zero2, zero2, **kw),
         fourier_segment("steer_right", Mode.PARKING, (_zero_series(sr), sr), periods=periods, geom=geom, dt=dt),
-        alignment(zero2, zero2, pause=pause, dt=dt),
+        alignment(zero2, zero2, **kw),
         fourier_segment("straight", Mode.STRAIGHT, straight or default_excitation("straight"), geom=geom, dt=dt),
-        alignment(zero2, rot, pause=pause, dt=dt),
+        alignment(zero2, rot, **kw),
         fourier_segment("rotation", Mode.ROTATION, rotation or default_excitation("rotation"), geom=geom, dt=dt),
-        alignment(rot, zero2, pause=pause, dt=dt),
+        alignment(rot, zero2, **kw),
     ]
     return Trajectory(tuple(segs), geom, dt, "identification")
 
@@ -166,8 +173,64 @@ def lane_change(geom: Geometry = PROTOTYPE, *, speed: float = 0.8, offset: float
     return Trajectory((seg,), geom, dt, "lane_change")
 
 
+def _envelope(t: np.ndarray, edges: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth direction envelope 0 -> +1 -> -1 -> 0 (quintic steps between the times ``edges``,
+    pairs (start, end) of each step) and its time derivative."""
+    levels = (0.0, 1.0, -1.0, 0.0)
+    e, de = np.zeros_like(t), np.zeros_like(t)
+    for k, (a, b) in enumerate(zip(edges[0::2], edges[1::2])):
+        p, pd_, _ = _smoothstep((t - a) / (b - a))
+        jump = levels[k + 1] - levels[k]
+        e += jump * p
+        de += jump * pd_ * ((t > a) & (t < b)) / (b - a)
+    return e, de
+
+
+def lifted_wheel_experiment(geom: Geometry = PROTOTYPE, *, duration: float = 24.0, mean_speed: float = 10.0,
+                            amplitude: float = 7.0, frequencies: tuple[float, ...] = (2.0, 4.7, 8.3),
+                            weights: tuple[float, ...] = (0.5, 0.3, 0.2), ramp: float = 1.5, reversal: float = 2.0,
+                            pause: float = 0.5, dt: float = SAMPLE_TIME) -> Trajectory:
+    """Single-axis experiment of sec. 7 (segment ``lifted_wheel``): the vehicle on jacks, each wheel
+    driven without ground contact, for ``B_w`` (and the wheel friction without load).
+
+    Each wheel turns forward, then backward: its rate is ``E(t) m_i(t)`` with a smooth direction
+    envelope E (0 -> +1 in ``ramp`` s, +1 -> -1 in ``reversal`` s at mid-time, -1 -> 0) and a speed
+    ``m_i = mean_speed + amplitude sum_k weights_k sin(frequencies_k t + phi_ik)`` (rad/s, wheel
+    side; phases differ per wheel), which keeps the wheels away from standstill except at the
+    start, the reversal and the end: only three stick events, while the accelerations
+    (``B_w beta_ddot``) change all the time. Both directions separate Coulomb friction from a
+    motor-torque offset. ``pause`` s at rest before and after.
+    """
+    if not (duration > 2 * (pause + ramp) + reversal and mean_speed > amplitude * sum(weights) >= 0):
+        raise TrajectoryError(f"lifted wheel: duration={duration}, mean_speed={mean_speed}, amplitude={amplitude}: "
+                              "expected a duration longer than the pauses, ramps and reversal and "
+                              "mean_speed > amplitude * sum(weights) (the wheels keep turning one way)")
+    if len(frequencies) != len(weights):
+        raise TrajectoryError(f"lifted wheel: {len(frequencies)} frequencies and {len(weights)} weights: "
+                              "expected as many of each")
+    t = _grid(duration, dt)
+    T = t[-1]
+    mid = T / 2
+    edges = (pause, pause + ramp, mid - reversal / 2, mid + reversal / 2, T - pause - ramp, T - pause)
+    e, de = _envelope(t, edges)
+    golden = (math.sqrt(5) - 1) / 2
+    rates = np.zeros((t.size, 2, 4))
+    for i in range(4):
+        m, dm = np.full_like(t, mean_speed), np.zeros_like(t)
+        for k, (w, c) in enumerate(zip(frequencies, weights)):
+            phi = 2 * math.pi * ((golden * (i + 1) * (k + 1)) % 1.0)
+            m += amplitude * c * np.sin(w * t + phi)
+            dm += amplitude * c * w * np.cos(w * t + phi)
+        rates[:, 0, i] = e * m
+        rates[:, 1, i] = de * m + e * dm
+    zeros = np.zeros((t.size, 2))
+    seg = Segment("lifted_wheel", Mode.PARKING, t, zeros, zeros, zeros, zeros, wheel_rates=rates)
+    return Trajectory((seg,), geom, dt, "lifted_wheel")
+
+
 def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME) -> Trajectory:
-    """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``) or a trajectory file."""
+    """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``, ``lifted-wheel``)
+    or a trajectory file."""
     key = name.strip().lower().replace("_", "-")
     if key == "identification":
         return identification_sequence(geom, dt=dt)
@@ -175,9 +238,11 @@ def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME
         return lane_change(geom, dt=dt)
     if key == "lateral":
         return lateral_experiment(geom, dt=dt)
+    if key == "lifted-wheel":
+        return lifted_wheel_experiment(geom, dt=dt)
     if Path(name).suffix.lower() in (".csv", ".yaml", ".yml"):
         from agvdyn.trajectories.files import read_trajectory
 
         return read_trajectory(name, geom, dt=dt)
-    raise TrajectoryError(f"unknown experiment {name!r}: expected identification, lane-change, lateral "
+    raise TrajectoryError(f"unknown experiment {name!r}: expected one of {', '.join(EXPERIMENTS)} "
                           "or a trajectory file (.csv, .yaml)")

@@ -161,7 +161,8 @@ def _read_yaml_trajectory(path: Path, geom: Geometry, dt: float) -> Trajectory:
             if name == "align":
                 target = np.asarray(spec.get("to", alpha_now), dtype=float)
                 seg = alignment(alpha_now, target, pause=float(spec.get("pause", 0.5)),
-                                rate=float(spec.get("rate", 0.8)), dt=dt)
+                                rate=float(spec.get("rate", 0.8)),
+                                acceleration=float(spec.get("acceleration", 2.0)), dt=dt)
             elif name == "lane_change" and "fourier" not in spec:
                 keys = {"speed", "offset", "length", "acceleration", "straight_before", "straight_after"}
                 unknown = set(spec) - keys - {"name", "mode"}

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agvdyn.dynamics import feedforward_torques
+from agvdyn.dynamics import feedforward_torques, generalized_forces
 from agvdyn.kinematics import Mode, check_mode, joint_motion, nominal_steering
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
 from agvdyn.trajectories.errors import TrajectoryError
@@ -31,7 +31,8 @@ __all__ = ["CONTINUITY_TOLERANCE", "SEGMENT_NAMES", "Segment", "Trajectory", "po
 #: Largest jump of the steering angles (rad) allowed between the end of a segment and the next one.
 CONTINUITY_TOLERANCE = 1e-3
 #: Segment names of PLATFORM.md (the ``segment`` column of a log).
-SEGMENT_NAMES = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align")
+SEGMENT_NAMES = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align",
+                 "lifted_wheel")
 
 
 # --- segments and trajectories --------------------------------------------------------------------
@@ -42,6 +43,11 @@ class Segment:
 
     ``t`` starts at 0; ``alpha`` is ``(N, 2)``; ``s``, ``s_dot``, ``s_ddot`` are ``(N, n_k)`` in the
     coordinates of ``mode.coordinates``.
+
+    Wheels lifted off the ground (the single-axis experiment of sec. 7, segment ``lifted_wheel``):
+    ``wheel_rates`` ``(N, 2, 4)`` holds the planned wheel rates and accelerations (beta_dot,
+    beta_ddot, wheel order fl, rl, fr, rr); the chassis stands on jacks, the steering at rest
+    (mode 1 with constant ``alpha``), and the wheels turn freely.
     """
 
     name: str
@@ -51,6 +57,7 @@ class Segment:
     s: np.ndarray
     s_dot: np.ndarray
     s_ddot: np.ndarray
+    wheel_rates: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.name not in SEGMENT_NAMES:
@@ -65,6 +72,36 @@ class Segment:
                 raise TrajectoryError(f"segment {self.name!r}: {key} of shape {arr.shape}: expected finite ({n}, {width})")
             arr.setflags(write=False)
             object.__setattr__(self, key, arr)
+        if self.wheel_rates is not None:
+            w = np.asarray(self.wheel_rates, dtype=float)
+            if w.shape != (n, 2, 4) or not np.isfinite(w).all():
+                raise TrajectoryError(f"segment {self.name!r}: wheel_rates of shape {w.shape}: expected finite ({n}, 2, 4)")
+            if self.mode is not Mode.PARKING or np.any(self.s_dot != 0) or np.any(self.s_ddot != 0):
+                raise TrajectoryError(f"segment {self.name!r}: lifted wheels need the steering at rest (mode 1, "
+                                      "s_dot = s_ddot = 0)")
+            w.setflags(write=False)
+            object.__setattr__(self, "wheel_rates", w)
+
+    @property
+    def lifted(self) -> bool:
+        """The wheels turn off the ground (``wheel_rates`` given)."""
+        return self.wheel_rates is not None
+
+    def joint_motion(self, geom: Geometry) -> tuple[np.ndarray, np.ndarray]:
+        """Planned ``(q_dot, q_ddot)`` ``(N, 9)``: eq. (4) and (20), or the free wheels when lifted."""
+        if not self.lifted:
+            return joint_motion(geom, self.mode, self.alpha, self.s_dot, self.s_ddot)
+        qd, qdd = np.zeros((self.n_samples, 9)), np.zeros((self.n_samples, 9))
+        qd[:, 5:], qdd[:, 5:] = self.wheel_rates[:, 0], self.wheel_rates[:, 1]
+        return qd, qdd
+
+    def feedforward(self, geom: Geometry, params: Parameters) -> np.ndarray:
+        """Motor torques ``(N, 4)``: eq. (21), or, lifted, the wheel rows of eq. (16)-(17) alone
+        (``i_G M = B_w beta_ddot + d_vw beta_dot + d_cw tanh(beta_dot / epsilon)``)."""
+        if not self.lifted:
+            return feedforward_torques(geom, params, self.mode, self.alpha, self.s_dot, self.s_ddot)
+        qd, qdd = self.joint_motion(geom)
+        return generalized_forces(qd, qdd, params)[:, 5:] / geom.i_G
 
     @property
     def n_samples(self) -> int:
@@ -93,6 +130,10 @@ class Trajectory:
         if not self.segments:
             raise TrajectoryError("a trajectory needs at least one segment")
         object.__setattr__(self, "segments", tuple(self.segments))
+        lifted = [seg.lifted for seg in self.segments]
+        if any(lifted) and not all(lifted):
+            raise TrajectoryError(f"trajectory {self.name!r}: segments {[s.name for s in self.segments]} mix lifted "
+                                  "wheels and ground contact: expected a lifted-wheel experiment on its own")
         for i, seg in enumerate(self.segments):
             try:
                 check_mode(self.geometry, seg.mode, seg.alpha)
@@ -157,16 +198,19 @@ class Trajectory:
         """Second derivative of :attr:`s` ``(N, 2)`` (NaN-padded like it)."""
         return self._stacked("s_ddot")
 
+    @property
+    def lifted(self) -> bool:
+        """The wheels turn off the ground (a lifted-wheel experiment, sec. 7)."""
+        return self.segments[0].lifted
+
     def joint_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """Planned ``(q_dot, q_ddot)`` ``(N, 9)`` of every sample, eq. (4) and (20)."""
-        parts = [joint_motion(self.geometry, s.mode, s.alpha, s.s_dot, s.s_ddot) for s in self.segments]
+        parts = [s.joint_motion(self.geometry) for s in self.segments]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def feedforward(self, params: Parameters) -> np.ndarray:
         """Feed-forward motor torques ``(N, 4)`` of eq. (21) with the parameters ``params``."""
-        return np.concatenate([
-            feedforward_torques(self.geometry, params, s.mode, s.alpha, s.s_dot, s.s_ddot) for s in self.segments
-        ])
+        return np.concatenate([s.feedforward(self.geometry, params) for s in self.segments])
 
     def wheel_angles(self, q_dot: np.ndarray | None = None) -> np.ndarray:
         """Planned wheel angles beta ``(N, 4)`` from 0: trapezoidal integral of the planned beta_dot."""

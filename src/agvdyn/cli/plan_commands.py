@@ -1,0 +1,102 @@
+"""Command ``agvdyn plan``: the optimal identification sequence in a floor rectangle (sec. 6.2)."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from agvdyn.cli._app import app, fail, platform_option
+
+
+@app.command()
+def plan(
+    out: Path = typer.Option(..., "--out", "-o", help="Trajectory file to write (.yaml, the segment format of "
+                             "docs/simulation.md) for simulate and feedforward."),
+    floor: str = typer.Option("5.2x1.6", help="Floor rectangle LENGTHxWIDTH in metres, the vehicle's footprint "
+                              "included (length along the straight motion)."),
+    duration: Optional[float] = typer.Option(None, help="Total duration in s, alignments included; default: the "
+                                             "default sequence's (117.6 s on the prototype)."),
+    objective: str = typer.Option("std", help="std (predicted relative std, default), d-optimal, or cond "
+                                  "(condition number of the column-scaled regressor)."),
+    platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
+    params: Optional[Path] = typer.Option(None, help="Nominal parameters (YAML/JSON) for the feed-forward torques "
+                                          "and the relative stds; default: Table 2 with B_w = 0.121."),
+    settings: Optional[Path] = typer.Option(None, help="Simulation settings (YAML) whose limits group (and the "
+                                            "plant's torque_limit) bound the plan; see docs/simulation.md."),
+    starts: int = typer.Option(6, help="Random starts of the optimiser."),
+    seed: int = typer.Option(0, help="Seed of the starts."),
+    figure: Optional[Path] = typer.Option(None, help="Also save the floor, path and predicted stds as a figure "
+                                          "(.png, .svg or .pdf)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Plan the four-phase identification sequence (steer left, steer right, straight, rotation) for a floor
+    and a duration, and compare it with the default sequence in the same floor."""
+    from agvdyn._files import write_text_atomically
+    from agvdyn.cli.sim_commands import _params
+    from agvdyn.simulation import SimulationSettings, read_settings
+    from agvdyn.trajectories import TrajectoryError
+    from agvdyn.trajectories.planner import FREE, PlanSettings, parse_floor, plan as make_plan
+
+    import yaml
+
+    if out.suffix.lower() not in (".yaml", ".yml"):
+        raise fail(f"--out {out}: unknown suffix {out.suffix!r}: expected .yaml or .yml")
+    try:
+        sim = SimulationSettings() if settings is None else read_settings(settings)
+        plan_settings = PlanSettings(objective=objective, starts=starts, seed=seed)
+        rectangle = parse_floor(floor)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    limits = sim.limits
+    if sim.plant.torque_limit is not None and sim.plant.torque_limit != limits.motor_torque:
+        limits = replace(limits, motor_torque=sim.plant.torque_limit)
+    geom = platform_option(platform)
+    nominal = _params(params)
+    try:
+        result = make_plan(geom, rectangle, duration, params=nominal, limits=limits, settings=plan_settings)
+    except (TrajectoryError, ValueError) as exc:
+        raise fail(str(exc)) from exc
+    try:
+        written = write_text_atomically(out, yaml.safe_dump(result.to_yaml_dict(), sort_keys=False))
+        if figure is not None:
+            from agvdyn.trajectories.planner import plan_figure
+
+            fig = plan_figure(result)
+            fig.savefig(figure, dpi=120)
+    except (OSError, ValueError) as exc:
+        raise fail(f"cannot write the plan: {exc}") from exc
+    if as_json:
+        data = result.to_dict()
+        data["out"] = str(written)
+        typer.echo(json.dumps(data, indent=2))
+        return
+    console = Console()
+    ev, ref = result.evaluation, result.reference
+    table = Table(title=f"Planned identification sequence ({result.objective}) next to the default sequence in "
+                        f"{rectangle.length:g} m x {rectangle.width:g} m")
+    for col in ("", "plan", "default"):
+        table.add_column(col, justify="left" if not col else "right")
+    table.add_row("cond(Theta_1w^T Theta_1w)", f"{ev.cond:.2f}", f"{ref.cond:.2f}")
+    table.add_row("floor used (m)", f"{ev.floor.length:.2f} x {ev.floor.width:.2f}",
+                  f"{ref.floor.length:.2f} x {ref.floor.width:.2f}")
+    table.add_row("duration (s)", f"{ev.duration:.1f}", f"{ref.duration:.1f}")
+    table.add_row("peak feed-forward torque (N m)", f"{ev.peak_torque:.2f}", f"{ref.peak_torque:.2f}")
+    for name in FREE:
+        table.add_row(f"predicted std {name}", f"{ev.std[name]:.4g} ({100 * ev.relative_std[name]:.2f} %)",
+                      f"{ref.std[name]:.4g} ({100 * ref.relative_std[name]:.2f} %)")
+    console.print(table)
+    phases = Table(title="Phases (one period of a Fourier series each, at rest at both ends)")
+    for col in ("phase", "mode", "duration s", "harmonics", "peak position", "peak velocity", "peak acceleration",
+                "limited by"):
+        phases.add_column(col, justify="left" if col in ("phase", "mode", "limited by") else "right")
+    for p in result.phases:
+        phases.add_row(p.name, p.mode, f"{p.duration:.1f}", str(p.harmonics), f"{p.peak_position:.3g}",
+                       f"{p.peak_velocity:.3g}", f"{p.peak_acceleration:.3g}", p.limiting)
+    console.print(phases)
+    console.print(f"planned in {result.elapsed:.1f} s from {len(result.starts)} starts; wrote {written}"
+                  + (f" and {figure}" if figure is not None else ""))
