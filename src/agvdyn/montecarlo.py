@@ -93,11 +93,19 @@ def run_study_case(case: StudyCase) -> list[dict[str, Any]]:
 
 
 def run_study(cases: Sequence[StudyCase], *, workers: int = 1,
-              progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
-    """Run the cases (in ``workers`` processes when > 1) and return the study table."""
+              progress: Callable[[int, int], None] | None = None, scheduler: str | None = None) -> pd.DataFrame:
+    """Run the cases (in ``workers`` processes when > 1, or on the workers of the Dask scheduler at the
+    address ``scheduler``) and return the study table."""
     rows: list[dict[str, Any]] = []
     done = 0
-    if workers <= 1:
+    if scheduler is not None:
+        from agvdyn.batch import map_on_dask
+
+        for _, result, error in map_on_dask(run_study_case, cases, scheduler=scheduler, progress=progress):
+            if error is not None:
+                raise error
+            rows += result
+    elif workers <= 1:
         for case in cases:
             rows += run_study_case(case)
             done += 1

@@ -10,6 +10,7 @@ from agvdyn.cli import identify_commands  # noqa: E402,F401
 from agvdyn.cli import sim_commands  # noqa: E402,F401
 from agvdyn.cli import inspect_command  # noqa: E402,F401
 from agvdyn.cli import study_commands  # noqa: E402,F401
+from agvdyn.cli import batch_commands  # noqa: E402,F401
 from agvdyn.cli import plan_commands  # noqa: E402,F401
 
 

@@ -31,6 +31,9 @@ def montecarlo(
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the built-in prototype."),
     seed: int = typer.Option(1000, help="Seed of the first run; run i uses seed + i."),
     workers: int = typer.Option(2, help="Processes running the runs in parallel."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler "
+                                            "(tcp://host:port) whose workers run the runs; default: --workers "
+                                            "local processes."),
 ) -> None:
     """Repeat simulate -> identify with different noise seeds; print bias, RMSE, mean reported std,
     RMSE / mean std, 95 % coverage and time per estimator and parameter."""
@@ -68,8 +71,9 @@ def montecarlo(
         with Progress(TextColumn("montecarlo"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                       console=console) as bar:
             task = bar.add_task("runs", total=runs)
-            table = run_study(cases, workers=workers, progress=lambda done, total: bar.update(task, completed=done))
-    except (ValueError, OSError) as exc:
+            table = run_study(cases, workers=workers, progress=lambda done, total: bar.update(task, completed=done),
+                              scheduler=scheduler)
+    except (ValueError, OSError, TimeoutError) as exc:
         raise fail(str(exc)) from exc
     write_atomically(out, lambda tmp: table.to_parquet(tmp, index=False))
     summary = summarize(table)
