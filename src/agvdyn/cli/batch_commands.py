@@ -72,7 +72,7 @@ def batch(
             view.add_column(col, justify="left" if col in ("job", "status") else "right")
         for name, row in per_job.iterrows():
             ok = row["error"] == ""
-            view.add_row(str(name), "ok" if ok else f"[red]{row['error']}[/red]", f"{int(row['rows']):,}" if ok else "",
+            view.add_row(str(name), "ok" if ok else f"[red]{row['error'].splitlines()[0]}[/red]", f"{int(row['rows']):,}" if ok else "",
                          f"{row['cond']:.4g}" if ok else "", f"{row['seconds']:.2f}")
         Console(highlight=False).print(view)
     typer.echo(f"wrote {out} ({len(table):,} rows; {len(per_job) - len(failed)} of {len(per_job)} jobs identified)")
