@@ -251,3 +251,51 @@ def test_per_sample_generalized_coordinates(sequence):
     np.testing.assert_array_equal(sequence.s[steer], sequence.alpha[steer])  # mode 1: s = alpha
     qd, _ = sequence.joint_motion()
     np.testing.assert_allclose(sequence.s_dot[rot, 0], qd[rot, 2])  # mode 4: s_dot = omega
+
+
+def test_package_modules_and_public_names():
+    """One module per job under agvdyn.trajectories; every public name importable from the package."""
+    import importlib
+
+    import agvdyn.trajectories as trajectories
+
+    for module in ("errors", "fourier", "segments", "limits", "experiments", "files", "planner"):
+        importlib.import_module(f"agvdyn.trajectories.{module}")
+    for name in trajectories.__all__:
+        assert hasattr(trajectories, name), name
+    for name in ("Limits", "Trajectory", "TrajectoryError", "check_limits", "experiment", "floor_space",
+                 "pose_from_velocities", "read_trajectory", "lifted_wheel_experiment"):
+        assert name in trajectories.__all__
+
+
+def test_car_like_fourier_segment_and_yaml(tmp_path):
+    """Mode 2 from two series (alpha_v, x_ch): steering on the ICR relation (eq. 8), omega = 2 v tan(alpha_v) / l."""
+    w = 2 * math.pi / 20
+    av = FourierSeries.at_rest(w, (0.3, -0.5, 0.2), (0.4, 0.1, -0.3), peak_excursion=0.6, peak_velocity=0.5)
+    x = FourierSeries.at_rest(w, (0.5, 0.2, -0.4), (-0.2, 0.6, 0.1), peak_excursion=1.0, peak_velocity=0.5)
+    seg = fourier_segment("lane_change", Mode.CAR_LIKE, (av, x))
+    np.testing.assert_allclose(icr_residual(PROTOTYPE, seg.alpha), 0.0, atol=1e-9)
+    traj = Trajectory((seg,))
+    qd, _ = traj.joint_motion()
+    np.testing.assert_allclose(qd[:, 2], 2 * qd[:, 0] * np.tan(seg.s[:, 0]) / 1.2, atol=1e-9)
+    with pytest.raises(TrajectoryError, match="beyond the stops"):
+        fourier_segment("lane_change", Mode.CAR_LIKE, (FourierSeries.at_rest(w, (1.0, -1.0), (1.0, 0.5),
+                                                                              peak_excursion=1.4), x))
+    path = tmp_path / "car.yaml"
+    spec = {"segments": [{"name": "lane_change", "mode": "2", "fourier": {
+        "alpha_v": {"base_frequency": w, "a": list(av.a), "b": list(av.b)},
+        "x_ch": {"base_frequency": w, "a": list(x.a), "b": list(x.b)}}}]}
+    import yaml
+
+    path.write_text(yaml.safe_dump(spec), encoding="utf-8")
+    got = read_trajectory(path).segments[0]
+    np.testing.assert_allclose(got.s, seg.s, atol=1e-9)
+    np.testing.assert_allclose(got.alpha, seg.alpha, atol=1e-9)
+
+
+def test_lifted_wheel_experiment_by_name():
+    traj = experiment("lifted-wheel")
+    assert traj.lifted and traj.name == "lifted_wheel"
+    assert traj.floor_space().length == pytest.approx(1.2)  # on jacks: the chassis does not move
+    with pytest.raises(TrajectoryError, match="lifted-wheel"):
+        experiment("jacks")

@@ -41,7 +41,7 @@ def read_trajectory(path: str | os.PathLike, geom: Geometry = PROTOTYPE, *, dt: 
     which gives the derivatives. The file is never modified.
 
     YAML: ``segments:`` a list of ``{name, mode, fourier: {base_frequency, a, b}}`` (mode 1:
-    ``fourier: {alpha_l: {...}, alpha_r: {...}}``), ``{name: align, to: [alpha_l, alpha_r]}`` or
+    ``fourier: {alpha_l: {...}, alpha_r: {...}}``; mode 2: ``fourier: {alpha_v: {...}, x_ch: {...}}``), ``{name: align, to: [alpha_l, alpha_r]}`` or
     ``{name: lane_change, speed, offset, length, ...}`` (the arguments of :func:`lane_change`).
     """
     path = Path(path)
@@ -184,6 +184,14 @@ def _read_yaml_trajectory(path: Path, geom: Geometry, dt: float) -> Trajectory:
                     parts = [p or FourierSeries(ref.base_frequency, (0.0,) * len(ref.a), (0.0,) * len(ref.a),
                                                 float(alpha_now[j])) for j, p in enumerate(parts)]
                     seg = fourier_segment(name, mode, (parts[0], parts[1]), geom=geom, dt=dt)
+                elif mode is Mode.CAR_LIKE:
+                    if not isinstance(four, dict) or set(four) != {"alpha_v", "x_ch"}:
+                        raise TrajectoryError("mode 2 needs fourier: {alpha_v: {...}, x_ch: {...}} (the virtual "
+                                              "steering angle from where the previous segment ends, and the travel)")
+                    av = _series_from(path, f"{where}.fourier.alpha_v", four["alpha_v"])
+                    av = FourierSeries(av.base_frequency, av.a, av.b, float(virtual_from_steering(geom, alpha_now)[0]))
+                    seg = fourier_segment(name, mode, (av, _series_from(path, f"{where}.fourier.x_ch", four["x_ch"])),
+                                          geom=geom, dt=dt)
                 else:
                     seg = fourier_segment(name, mode, _series_from(path, f"{where}.fourier", four), geom=geom, dt=dt)
         except (TrajectoryError, ValueError, KeyError, StopIteration) as exc:

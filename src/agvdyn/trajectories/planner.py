@@ -91,7 +91,7 @@ class NoiseLevels:
     the square root of the variance inflation of the HAC uncertainty over the classic one (about
     4 for the steering, 7 for the chassis: the residuals are correlated over ~0.2 s). With them
     the predicted standard deviations of the default sequence match the HAC ones of
-    ``agvdyn identify`` within about 25 %. Only their ratios matter for the plan.
+    ``agvdyn identify`` within about 30 %. Only their ratios matter for the plan.
     """
 
     alpha_l: float = 0.7
@@ -655,15 +655,17 @@ def _guarded(keep: np.ndarray, guard: int) -> np.ndarray:
     return (cs[2 * guard + 1: 2 * guard + 1 + n] - cs[:n]) == 0
 
 
-def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, segments: tuple[str, ...] | None = None,
-                   validity: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (m, 14) of eq. (19) the identification keeps (ten parameters, then the offset columns)
-    and the noise level of each row; ``validity``: the optimiser's smooth weights instead of the mask."""
+def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
+    then the offset columns) and the noise level of each row; ``validity``: the optimiser's smooth
+    weights instead of the mask."""
     g = traj.geometry
+    n_p = 11 if with_bw else 10
     guard = int(round(settings.stiction_guard / traj.sample_time))
     rows, sig = [], []
     for seg in traj.segments:
-        if segments is not None and seg.name not in segments:
+        if seg.lifted:  # no rows of the vehicle
             continue
         qd, qdd = joint_motion(g, seg.mode, seg.alpha, seg.s_dot, seg.s_ddot)
         Y = projected_regressor(g, seg.mode, seg.alpha, qd, qdd)
@@ -681,33 +683,39 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, segments: tuple[
             if not keep.any():
                 continue
             offs = g.i_G * H[keep, 5:, j] if settings.torque_offsets else np.zeros((int(keep.sum()), _OFFSETS))
-            block = np.concatenate([Y[keep, j, :10], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
+            block = np.concatenate([Y[keep, j, :n_p], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
             rows.append(block)
             sig.append(np.full(int(keep.sum()), settings.noise.of(coord)))
     if not rows:
-        return np.zeros((0, 10 + _OFFSETS)), np.zeros(0)
+        return np.zeros((0, n_p + _OFFSETS)), np.zeros(0)
     return np.concatenate(rows), np.concatenate(sig)
 
 
-def _information(A: np.ndarray, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _information(A: np.ndarray, sig: np.ndarray, n_p: int = 10) -> tuple[np.ndarray, np.ndarray]:
     Aw = A / sig[:, None]
-    return Aw.T @ Aw, A[:, :10].T @ A[:, :10]
+    return Aw.T @ Aw, A[:, :n_p].T @ A[:, :n_p]
 
 
 def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(),
-                      settings: PlanSettings = PlanSettings()) -> SequenceEvaluation:
+                      settings: PlanSettings = PlanSettings(), *, estimate_bw: bool = False) -> SequenceEvaluation:
     """Predicted cond, standard deviations, floor, duration and peak torque of an identification
-    sequence, from its planned motion with the identification's stiction mask and guard."""
-    A, sig = _sequence_rows(traj, settings)
-    F, U = _information(A, sig)
+    sequence, from its planned motion with the identification's stiction mask and guard.
+
+    ``estimate_bw``: B_w estimated with the others (``identify --fix none``) instead of known; its
+    std is then in ``std`` too (infinite when the motion does not determine it).
+    """
+    names = FREE + (("B_w",) if estimate_bw else ())
+    n_p = len(names)
+    A, sig = _sequence_rows(traj, settings, with_bw=estimate_bw)
+    F, U = _information(A, sig, n_p)
     free = [i for i in range(F.shape[0]) if F[i, i] > 0]
-    std = np.full(10, np.inf)
+    std = np.full(n_p, np.inf)
     corr: dict[str, float] = {}
     try:
         cov = np.linalg.inv(F[np.ix_(free, free)])
         d = np.sqrt(np.maximum(np.diag(cov), 0))
         for k, i in enumerate(free):
-            if i < 10:
+            if i < n_p:
                 std[i] = d[k]
         r = cov / np.outer(d, d)
         for p_, q_ in (("d_vl", "d_cl"), ("d_vr", "d_cr"), ("d_vw", "d_cw"), ("C_r", "C_ch"), ("C_l", "C_ch")):
@@ -716,11 +724,11 @@ def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, l
     except (np.linalg.LinAlgError, ValueError):
         pass
     cond = _cond(U)
-    p = params.to_vector()[:10]
+    p = params.to_vector()[:n_p]
     report = limit_report(traj, params, limits)
     return SequenceEvaluation(
-        cond=cond, std={n: float(s) for n, s in zip(FREE, std)},
-        relative_std={n: float(s / abs(v)) for n, s, v in zip(FREE, std, p)},
+        cond=cond, std={n: float(s) for n, s in zip(names, std)},
+        relative_std={n: float(s / abs(v)) for n, s, v in zip(names, std, p)},
         floor=floor_space(traj), duration=traj.duration, peak_torque=report.peaks["motor_torque"],
         correlation=corr)
 
@@ -995,7 +1003,6 @@ def _build(problem: _Problem, x: np.ndarray, geom: Geometry, params: Parameters,
         series = {}
         for name, (c, s, kind, Tp, H) in scales.items():
             w = 2 * math.pi / Tp
-            k = np.arange(1, H + 1)
             # velocity amplitudes of the basis on u = t / T are the same on t
             series[name] = FourierSeries(w, tuple(s * c[:H]), tuple(s * c[H:]))
         traj = _sequence(geom, series, settings, dt)
@@ -1089,7 +1096,7 @@ def plan_figure(plan_: Plan) -> "Figure":
     for name, sl in traj.segment_slices():
         if name != "align":
             ax2.axvspan(t[sl.start], t[sl.stop - 1], alpha=0.07, color="black")
-            ax2.text(t[sl.start], ax2.get_ylim()[1] if False else 0, name, fontsize=7, va="bottom")
+            ax2.text(t[sl.start], 1.01, name, fontsize=7, va="bottom", transform=ax2.get_xaxis_transform())
     ax2.set_xlabel("t (s)")
     ax2.legend(fontsize=7, ncol=2)
     ax2.set_title("Planned phases")

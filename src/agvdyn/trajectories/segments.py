@@ -17,7 +17,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agvdyn.dynamics import feedforward_torques, generalized_forces
-from agvdyn.kinematics import Mode, check_mode, joint_motion, nominal_steering
+from agvdyn.kinematics import (
+    Mode,
+    check_mode,
+    joint_motion,
+    max_virtual_angle,
+    nominal_steering,
+    steering_from_virtual,
+)
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.fourier import FourierSeries
@@ -292,19 +299,27 @@ def fourier_segment(name: str, mode, series: FourierSeries | tuple[FourierSeries
 
     Modes 3, 4 and straight take one series (``y_ch``, ``gamma_ch``, ``x_ch``) at their fixed steering
     angles; mode 1 takes two series ``(alpha_l, alpha_r)`` (a side held at zero: a series with zero
-    coefficients). Mode 2 is planned with :func:`lane_change`.
+    coefficients); mode 2 (car-like) two series ``(alpha_v, x_ch)``, the steering angles following
+    from alpha_v by eq. (8) (:func:`lane_change` plans the validation manoeuvre of sec. 7).
     """
     mode = Mode.from_label(mode)
     if not (isinstance(periods, int) and periods >= 1):
         raise TrajectoryError(f"segment {name!r}: periods={periods!r}: expected an integer >= 1")
-    if mode is Mode.PARKING:
+    if mode in (Mode.PARKING, Mode.CAR_LIKE):
+        names = "(alpha_l, alpha_r)" if mode is Mode.PARKING else "(alpha_v, x_ch)"
         if not (isinstance(series, tuple) and len(series) == 2):
-            raise TrajectoryError(f"segment {name!r} in mode 1: expected two series (alpha_l, alpha_r)")
+            raise TrajectoryError(f"segment {name!r} in mode {mode.label}: expected two series {names}")
         if series[0].base_frequency != series[1].base_frequency:
             raise TrajectoryError(f"segment {name!r}: the two series need the same base frequency")
         t = _grid(series[0].period * periods, dt)
         parts = [np.stack(x, axis=1) for x in zip(series[0].evaluate(t), series[1].evaluate(t))]
-        return Segment(name, mode, t, parts[0], parts[0], parts[1], parts[2])
+        if mode is Mode.PARKING:
+            return Segment(name, mode, t, parts[0], parts[0], parts[1], parts[2])
+        limit = max_virtual_angle(geom)
+        if np.max(np.abs(parts[0][:, 0])) > limit:
+            raise TrajectoryError(f"segment {name!r}: |alpha_v| reaches {np.max(np.abs(parts[0][:, 0])):.4g} rad, "
+                                  f"beyond the stops ({limit:.4g} rad): expected a smaller steering series")
+        return Segment(name, mode, t, steering_from_virtual(geom, parts[0][:, 0]), parts[0], parts[1], parts[2])
     nominal = nominal_steering(geom, mode)
     if nominal is None or isinstance(series, tuple):
         raise TrajectoryError(f"segment {name!r}: mode {mode.label} takes one Fourier series; mode 2 see lane_change()")

@@ -1,0 +1,190 @@
+"""The planner of the identification sequence (agvdyn plan): gradients, limits, floor, files, and the
+acceptance of issue 11 on the simulator (planned sequence simulated and identified next to the default)."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from agvdyn.cli import app
+from agvdyn.identification import IdentificationSettings, identify
+from agvdyn.io import Log
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
+from agvdyn.simulation import simulate
+from agvdyn.trajectories import (
+    FloorSpace,
+    Limits,
+    TrajectoryError,
+    check_limits,
+    identification_sequence,
+    lane_change,
+    read_trajectory,
+)
+from agvdyn.trajectories import planner as pl
+
+P = PAPER_PARAMETERS
+
+
+def _log(result) -> Log:
+    return Log.from_frame(result.log_frame(), sidecar=result.sidecar())
+
+
+def _problem(objective: str, seed: int = 1) -> tuple[pl._Problem, np.ndarray]:
+    settings = pl.PlanSettings(objective=objective)
+    models = pl._phase_models(PROTOTYPE, P, FloorSpace(5.2, 1.6), Limits(), settings)
+    rng = np.random.default_rng(seed)
+    harmonics = [6, 7, 5, 6]
+    problem = pl._Problem(models, harmonics, 100.0, settings, P.to_vector(), np.eye(14) * 1e3, np.eye(10) * 1e2,
+                          np.full(10, -5.0), 0.002, [1500] * 4)
+    x = np.concatenate([rng.standard_normal(2 * h) for h in harmonics] + [0.3 * rng.standard_normal(4)])
+    return problem, x
+
+
+@pytest.mark.parametrize("objective", pl.OBJECTIVES)
+def test_objective_gradient_matches_finite_differences(objective):
+    """The analytic gradient (moments, Fourier basis, scaling to the limits, durations) against central
+    differences of the objective; a step may cross a kink of the scaling (two equal peaks): median."""
+    problem, x = _problem(objective)
+    J, g = problem(x)
+    assert J == pytest.approx(problem.objective(x))
+    h = 1e-6
+    fd = np.array([(problem.objective(x + e) - problem.objective(x - e)) / (2 * h) for e in np.eye(x.size) * h])
+    err = np.abs(g - fd) / (np.abs(fd).max() + 1e-12)
+    assert np.median(err) < 1e-5 and np.quantile(err, 0.9) < 1e-3
+
+
+def test_planner_thresholds_are_the_identification_defaults():
+    ident, plan_ = IdentificationSettings(), pl.PlanSettings()
+    assert plan_.steering_threshold == ident.steering_threshold
+    assert plan_.stiction_threshold == ident.stiction_threshold
+    assert plan_.stiction_guard == pytest.approx(ident.seconds(ident.stiction_guard))
+
+
+def test_prediction_of_the_default_sequence():
+    """The predicted cond of the default sequence is the one the identification reports on the simulator
+    (17.4 with seed 2); the predicted stds are within ~30 % of its HAC stds (docs/planning.md)."""
+    ev = pl.evaluate_sequence(identification_sequence(), P)
+    assert 15 < ev.cond < 20
+    assert ev.std["C_l"] == pytest.approx(0.0034, rel=0.3)
+    assert ev.std["m_ch"] == pytest.approx(0.705, rel=0.3)
+    assert ev.floor.length == pytest.approx(5.2, abs=1e-3)
+
+
+def test_default_for_floor_fits_the_floor_and_duration():
+    traj = pl.default_for_floor(PROTOTYPE, FloorSpace(3.0, 2.0), 90.0)
+    assert traj.floor_space().length <= 3.0 + 1e-9
+    assert traj.duration == pytest.approx(90.0, abs=0.05)
+    assert check_limits(traj).ok
+
+
+def test_floor_and_settings_errors():
+    with pytest.raises(TrajectoryError, match="LENGTHxWIDTH"):
+        pl.parse_floor("5,2 by 1,6")
+    with pytest.raises(TrajectoryError, match="rotation needs"):
+        pl.plan(PROTOTYPE, FloorSpace(3.0, 1.2))
+    with pytest.raises(TrajectoryError, match="objective"):
+        pl.PlanSettings(objective="fast")
+    with pytest.raises(TrajectoryError, match="too short|shorter than the alignments"):
+        pl.plan(PROTOTYPE, "3x2", 15.0, settings=pl.PlanSettings(starts=1, workers=1))
+
+
+@pytest.fixture(scope="module")
+def quick_plan():
+    return pl.plan(PROTOTYPE, "3x2", settings=pl.PlanSettings(starts=2, workers=1, max_iterations=60))
+
+
+def test_plan_respects_floor_limits_and_duration(quick_plan):
+    traj = quick_plan.trajectory
+    assert quick_plan.evaluation.floor.length <= 3.0 + 1e-9
+    assert quick_plan.evaluation.floor.width <= 2.0
+    assert traj.duration == pytest.approx(quick_plan.reference.duration, abs=0.05)
+    assert check_limits(traj, P).ok
+    assert [s.name for s in traj.segments if s.name != "align"] == ["steer_left", "steer_right", "straight",
+                                                                      "rotation"]
+    qd, _ = traj.joint_motion()
+    np.testing.assert_allclose(qd[traj.bounds[:-1]], 0.0, atol=1e-9)  # every phase starts at rest
+    for phase in quick_plan.phases:  # one Fourier period, the highest harmonic inside the filter band
+        assert phase.harmonics * phase.series.base_frequency <= 1.5 * quick_plan.settings.max_frequency
+
+
+def test_plan_file_round_trip_and_figure(quick_plan, tmp_path):
+    path = tmp_path / "plan.yaml"
+    path.write_text(yaml.safe_dump(quick_plan.to_yaml_dict(), sort_keys=False), encoding="utf-8")
+    traj = read_trajectory(path)
+    assert traj.n_samples == quick_plan.trajectory.n_samples
+    np.testing.assert_allclose(traj.alpha, quick_plan.trajectory.alpha, atol=1e-7)  # the reader re-projects
+    np.testing.assert_allclose(traj.pose(), quick_plan.trajectory.pose(), atol=1e-7)
+    fig = pl.plan_figure(quick_plan)
+    assert len(fig.axes) == 3
+
+
+def test_cli_plan_json(tmp_path):
+    out = tmp_path / "plan.yaml"
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--starts", "1", "--out", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["floor"] == {"length": 3.0, "width": 2.0}
+    assert data["cond"] < data["default"]["cond"]
+    assert data["duration"] == pytest.approx(data["default"]["duration"], abs=0.05)
+    assert set(data["std"]) == set(pl.FREE) and data["peak_torque"] > 0
+    assert read_trajectory(out).duration == pytest.approx(data["duration"], abs=0.01)
+    bad = CliRunner().invoke(app, ["plan", "--floor", "2x1", "--out", str(out)])
+    assert bad.exit_code == 2 and "rotation needs" in bad.output
+
+
+def test_b_w_from_car_like_motion_is_hardly_determined():
+    """With B_w free, the default sequence plus the lane change predicts a B_w std of tens of per cent:
+    its column in mode 2 differs from those of m_ch, C_ch, C_l, C_r by the offset a alone (docs/planning.md)."""
+    seq, lane = identification_sequence(), lane_change()
+    from agvdyn.trajectories import Trajectory
+
+    both = Trajectory(seq.segments + tuple(lane.segments), PROTOTYPE, name="both")
+    ev = pl.evaluate_sequence(both, P, settings=pl.PlanSettings(), estimate_bw=True)
+    assert ev.relative_std["B_w"] > 0.2
+    assert math.isinf(pl.evaluate_sequence(seq, P, estimate_bw=True).std["B_w"]) or \
+        pl.evaluate_sequence(seq, P, estimate_bw=True).relative_std["B_w"] > 1
+
+
+# --- acceptance on the simulator ------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def acceptance():
+    """The plan in the default sequence's own floor and duration, both simulated (seed 2) and identified."""
+    plan_ = pl.plan(PROTOTYPE, "5.2x1.6")
+    planned = identify(_log(simulate(plan_.trajectory, seed=2)))
+    default = identify(_log(simulate("identification", seed=2)))
+    return plan_, planned, default
+
+
+def test_planned_sequence_is_better_conditioned(acceptance):
+    plan_, planned, default = acceptance
+    assert plan_.evaluation.floor.length <= 5.2 and plan_.trajectory.duration == pytest.approx(117.6, abs=0.05)
+    assert planned.condition_number <= 9  # goal 6, the paper 11.56, the default ~17
+    assert planned.condition_number <= 0.6 * default.condition_number
+
+
+def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
+    _, planned, default = acceptance
+    worse = {n: (planned.std[n], default.std[n]) for n in planned.std if planned.std[n] > default.std[n]}
+    assert not worse, f"std larger than with the default sequence: {worse}"
+
+
+def test_planned_sequence_parameters_within_5_percent_or_3_std(acceptance):
+    _, planned, _ = acceptance
+    off = {}
+    for name, std in planned.std.items():
+        value, truth = getattr(planned.parameters, name), getattr(P, name)
+        if abs(value - truth) > max(0.05 * abs(truth), 3 * std):
+            off[name] = (value, truth, std)
+    assert not off, f"outside 5 % / 3 std: {off}"
+
+
+def test_plan_in_a_small_floor_identifies_all_ten():
+    plan_ = pl.plan(PROTOTYPE, "3x2")
+    ident = identify(_log(simulate(plan_.trajectory, seed=3)))  # refuses (raises) when something is not excited
+    assert set(ident.std) == set(pl.FREE)
+    assert ident.condition_number <= 9
