@@ -15,18 +15,19 @@ regressor ``H_k^T Theta`` of a phase with constant ``H_k`` (modes 1, 4 and strai
 motor-torque offsets the identification estimates with them). The information matrix of the
 sequence is therefore ``F = sum_phases P^T M P / sigma^2`` with the phase's ``4 x 4`` moment
 matrix ``M = sum_t w_t z_t z_t^T`` and the noise level ``sigma`` of its generalized coordinate
-(:class:`NoiseLevels`). The weight ``w`` of a row is a smooth step at ``validity`` times the
-identification's stiction threshold: rows just above the threshold are where the tanh friction
-model is least true (stick/slip, the steering controller hunting), so they earn no credit and
-the optimiser passes through that band quickly instead of drifting slowly in it.
+(:class:`NoiseLevels`, growing with the acceleration in translation: tyre slip). The weight ``w``
+of a row (:func:`_row_weights`) keeps the plan where the model is true: rows below ``validity``
+times the identification's stiction threshold earn no credit (slow motion: stick/slip), nor do
+rows the identification keeps within ``reversal_window`` of a velocity reversal (the reversal's
+stick, spread by the zero-phase filter); the time spent in either is penalised.
 
-Objectives (``PlanSettings.objective``):
+Objectives (``PlanSettings.objective``), each plus those validity penalties:
 
 * ``std`` (default): the mean of ``log(std_i / |p_i|)`` over the ten parameters (the predicted
   relative standard deviations, from ``F^-1``), with a penalty on every parameter whose predicted
-  std exceeds the one of the default sequence in the same floor and duration, and on
-  ``cond(Theta_1w^T Theta_1w)`` above ``cond_target``. It trades conditioning against precision
-  and the model's validity.
+  std exceeds ``reference_margin`` times the one of the default sequence in the same floor and
+  duration, and on ``cond(Theta_1w^T Theta_1w)`` above ``cond_target``. It trades conditioning
+  against precision and the model's validity.
 * ``d-optimal``: ``log det`` of the parameters' covariance (offsets eliminated).
 * ``cond``: ``log cond(Theta_1w^T Theta_1w)`` of the column-scaled regressor (eq. 25).
 
@@ -151,7 +152,8 @@ class PlanSettings:
         that the identification keeps carry the reversal's stick/slip, spread by its zero-phase
         filter (on the simulator they biased C_l, C_r by -3 to -11 %); they earn no credit and
         their share of the time costs ``reversal_penalty`` (see :func:`_row_weights`).
-    cond_target, reference_penalty : the ``std`` objective's penalties (see the module docstring).
+    cond_target, reference_penalty : the ``std`` objective's penalties (see the module docstring),
+        ``reference_penalty`` the weight of both.
     margin : share of every limit the plan may use (the rest for tracking and rounding).
     pause, align_rate, align_acceleration : the alignments at rest between the phases.
     grid : time step of the optimiser's evaluation, s (the result is evaluated at ``T_s``).
