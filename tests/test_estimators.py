@@ -60,13 +60,16 @@ def test_bounded_keeps_physical_signs_and_names_active_bounds():
         make_estimator("lasso")
 
 
-@hsettings(max_examples=15, deadline=None)
-@given(st.floats(0.0, 0.95), st.integers(0, 10_000))
+@hsettings(max_examples=15, deadline=None, derandomize=True)
+@given(st.floats(0.0, 0.9), st.integers(0, 10_000))
 def test_hac_against_the_known_long_run_variance(phi, seed):
     """AR(1) residuals: the Bartlett HAC std of a mean is within 25 % of the exact value
-    sqrt(sigma^2 (1 + phi) / (1 - phi) / n), classic's is too small by sqrt((1 + phi)/(1 - phi))."""
+    sqrt(sigma^2 (1 + phi) / (1 - phi) / n), classic's is too small by sqrt((1 + phi)/(1 - phi)).
+
+    The HAC estimate itself scatters by about sqrt(L / n) (L ~ 2 tau, n / tau independent
+    blocks): with phi <= 0.9 (tau <= 19) and n = 40,000 that is below 5 %, so 25 % is 5 sigma."""
     rng = np.random.default_rng(seed)
-    n = 20000
+    n = 40000
     e = np.empty(n)
     e[0] = rng.standard_normal()
     for i in range(1, n):

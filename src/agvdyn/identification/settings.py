@@ -35,7 +35,9 @@ EXCITATION: Mapping[str, str] = MappingProxyType({
     "C_ch": "rotation (mode 4)",
     "d_vw": "straight, lateral or rotation",
     "d_cw": "straight, lateral or rotation",
-    "B_w": "a car-like steered motion (mode 2, e.g. lane_change), or fix it from a single-axis test (--fix B_w=...)",
+    "B_w": "the lifted-wheel test (agvdyn simulate/identify lifted-wheel: wheels off the ground), then --fix "
+           "B_w=VALUE; car-like motion separates it from m_ch and C_ch only by terms of the offset a (variance "
+           "inflation ~1e3-1e6)",
     **dict.fromkeys(OFFSET_NAMES, "the four identification segments together (steer_left, steer_right, straight and "
                                   "rotation each see another combination of the motor offsets), or no offset "
                                   "estimation (--no-offsets)"),
