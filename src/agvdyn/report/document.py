@@ -62,7 +62,7 @@ table { border-collapse: collapse; margin: 6px 0 14px; font-size: 13.5px; font-v
 th, td { border-bottom: 1px solid var(--line); padding: 4px 10px; text-align: right; white-space: nowrap; }
 th { background: #f0f2f4; font-weight: 600; border-bottom: 2px solid var(--line); white-space: normal;
      vertical-align: bottom; }
-.l { text-align: left; }
+.l { text-align: left; } td.l { white-space: normal; }
 tr.bad td { background: #fdecea; } tr.fixed td { color: var(--muted); }
 .unit { white-space: nowrap; }
 .scroll { overflow-x: auto; }
