@@ -184,3 +184,12 @@ def test_montecarlo_on_a_scheduler_equals_the_process_pool(scheduler):
     pd.testing.assert_frame_equal(local.drop(columns="seconds"), remote.drop(columns="seconds"), rtol=1e-12)
     assert (remote["error"] == "").all() and not remote["value"].isna().any()
     assert not math.isnan(remote["std"].iloc[0])
+
+
+def test_montecarlo_command_takes_a_scheduler(scheduler, tmp_path):
+    out = tmp_path / "study.parquet"
+    res = CliRunner().invoke(app, ["montecarlo", "--out", str(out), "--runs", "2", "--ideal-plant",
+                                   "--uncertainty", "classic", "--scheduler", scheduler])
+    assert res.exit_code == 0, res.output
+    table = pd.read_parquet(out)
+    assert sorted(set(table["run"])) == [0, 1] and (table["error"] == "").all()
