@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -27,8 +27,9 @@ from agvdyn.kinematics import odometry
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
 from agvdyn.simulation._kernels import contact_points, run_chunk, slip_speeds
 from agvdyn.simulation.controller import STATE_SIZE, ControllerSettings
+from agvdyn.simulation._setup import prepare_run, run_chunks
 from agvdyn.simulation.plant import PlantSettings, plant_constants, run_open_loop
-from agvdyn.simulation.sensors import SensorSettings, draw_noise
+from agvdyn.simulation.sensors import SensorSettings
 from agvdyn.simulation.slip import (
     MERGE_GAP,
     SLIP_SCENARIO,
@@ -55,8 +56,6 @@ __all__ = [
     "SlipSettings", "FrictionPatch", "TorqueBurst", "SlipInterval", "SLIP_SCENARIO", "SLIP_THRESHOLD",
 ]
 
-#: Samples simulated between two progress reports.
-CHUNK = 5000
 
 
 @dataclass(frozen=True)
@@ -366,54 +365,28 @@ def simulate(
         from agvdyn.simulation.lifted import simulate_lifted
 
         return simulate_lifted(traj, platform, plant_params, ctrl_params, settings, seed, progress)
-    motion = traj.joint_motion()
-    q_dot_d = motion[0]
-    u_ff = traj.feedforward(ctrl_params)
-    if settings.check_limits:
-        limits = settings.limits
-        if settings.plant.torque_limit is not None and settings.plant.torque_limit != limits.motor_torque:
-            limits = replace(limits, motor_torque=settings.plant.torque_limit)
-        check_limits(traj, ctrl_params, limits, motion=motion, torques=u_ff)
-    beta_d = traj.wheel_angles(q_dot_d)
-    n = traj.n_samples
-    rng = np.random.default_rng(seed)
-    noise = draw_noise(n, settings.sensors, rng)
-    c = plant_constants(platform, plant_params, settings.plant)
-    g = settings.controller.gains(platform)
-    wheel_res = 2 * math.pi / (settings.sensors.encoder_counts * platform.i_G)
-    steer_res = 2 * math.pi / settings.sensors.steering_counts
-    pos = np.zeros(9)
-    pos[3:5] = traj.alpha[0]
-    vel = np.zeros(9)
-    cstate = np.zeros(STATE_SIZE)
-    work = np.zeros(3)
-    out = {k: np.zeros((n, w)) for k, w in (("pos", 9), ("vel", 9), ("alpha", 2), ("beta", 4), ("cmd", 4),
-                                            ("app", 4), ("meas", 4), ("work", 3))}
-    energy = np.zeros(n)
+    st = prepare_run(traj, platform, plant_params, ctrl_params, settings, seed, STATE_SIZE)
+    out = st.out
     alpha_d = np.ascontiguousarray(traj.alpha)
     mode_d = np.ascontiguousarray(traj.mode, dtype=np.int64)
-    alpha_dot_d = np.ascontiguousarray(q_dot_d[:, 3:5])
-    beta_dot_d = np.ascontiguousarray(q_dot_d[:, 5:])
+    alpha_dot_d = np.ascontiguousarray(st.q_dot_d[:, 3:5])
+    beta_dot_d = np.ascontiguousarray(st.q_dot_d[:, 5:])
     t = np.ascontiguousarray(traj.t, dtype=float)
     burst = settings.slip.burst_torques(t)
     patches = settings.slip.patch_table()
-    for k0 in range(0, n, CHUNK):
-        k1 = min(n, k0 + CHUNK)
-        run_chunk(k0, k1, c, g, Ts, settings.plant.substeps, wheel_res, steer_res,
-                  u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, noise.steering, noise.torque, noise.torque_offset,
-                  t, burst, patches,
-                  pos, vel, cstate, work,
+
+    def step(k0: int, k1: int) -> None:
+        run_chunk(k0, k1, st.c, st.g, Ts, settings.plant.substeps, st.wheel_res, st.steer_res,
+                  st.u_ff, mode_d, alpha_d, alpha_dot_d, st.beta_d, beta_dot_d, st.noise.steering, st.noise.torque,
+                  st.noise.torque_offset, t, burst, patches, st.pos, st.vel, st.cstate, st.work,
                   out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
-                  energy, out["work"])
-        if not np.all(np.isfinite(pos)) or not np.all(np.isfinite(vel)):
-            raise FloatingPointError(f"simulation of {traj.name!r} diverged at t = {k1 * Ts:.3f} s: "
-                                     "reduce the plant step (substeps) or the gains")
-        if progress is not None:
-            progress(k1, n)
+                  st.energy, out["work"])
+
+    run_chunks(traj.name, traj.n_samples, Ts, st, step, progress)
     return SimulationResult(
         traj, platform, plant_params, ctrl_params, settings, seed,
-        out["pos"], out["vel"], q_dot_d, beta_d, u_ff, out["alpha"], out["beta"],
-        out["cmd"], out["app"], out["meas"], energy, out["work"], burst,
+        out["pos"], out["vel"], st.q_dot_d, st.beta_d, st.u_ff, out["alpha"], out["beta"],
+        out["cmd"], out["app"], out["meas"], st.energy, out["work"], burst,
     )
 
 

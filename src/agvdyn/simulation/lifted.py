@@ -12,69 +12,43 @@ The log's segment label is ``lifted_wheel``.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import numpy as np
 
 from agvdyn.platform import Geometry, Parameters
 from agvdyn.simulation._kernels import run_lifted_chunk
-from agvdyn.simulation.plant import plant_constants
-from agvdyn.simulation.sensors import draw_noise
-from agvdyn.trajectories import Trajectory, check_limits
+from agvdyn.simulation._setup import prepare_run, run_chunks
+from agvdyn.trajectories import Trajectory
 
 __all__ = ["simulate_lifted"]
 
-#: Samples simulated between two progress reports.
-CHUNK = 5000
+#: Size of the controller state of the lifted-wheel kernel (``_kernels.run_lifted_chunk``).
+LIFTED_STATE_SIZE = 13
 
 
 def simulate_lifted(traj: Trajectory, platform: Geometry, plant_params: Parameters, controller_params: Parameters,
                     settings, seed: int, progress: Callable[[int, int], None] | None = None):
     """Simulate a lifted-wheel trajectory (``traj.lifted``); returns a :class:`SimulationResult`."""
-    from dataclasses import replace
-
     from agvdyn.simulation import SimulationResult
 
     if settings.slip.active:
         raise ValueError("a slip scenario needs ground contact: the lifted-wheel experiment has none")
     Ts = settings.sample_time
-    motion = traj.joint_motion()
-    q_dot_d = motion[0]
-    u_ff = np.ascontiguousarray(traj.feedforward(controller_params))
-    if settings.check_limits:
-        limits = settings.limits
-        if settings.plant.torque_limit is not None and settings.plant.torque_limit != limits.motor_torque:
-            limits = replace(limits, motor_torque=settings.plant.torque_limit)
-        check_limits(traj, controller_params, limits, motion=motion, torques=u_ff)
-    beta_d = np.ascontiguousarray(traj.wheel_angles(q_dot_d))
-    beta_dot_d = np.ascontiguousarray(q_dot_d[:, 5:])
+    st = prepare_run(traj, platform, plant_params, controller_params, settings, seed, LIFTED_STATE_SIZE)
+    out = st.out
+    beta_dot_d = np.ascontiguousarray(st.q_dot_d[:, 5:])
     n = traj.n_samples
-    noise = draw_noise(n, settings.sensors, np.random.default_rng(seed))
-    c = plant_constants(platform, plant_params, settings.plant)
-    g = settings.controller.gains(platform)
-    wheel_res = 2 * math.pi / (settings.sensors.encoder_counts * platform.i_G)
-    steer_res = 2 * math.pi / settings.sensors.steering_counts
-    pos = np.zeros(9)
-    pos[3:5] = traj.alpha[0]
-    vel = np.zeros(9)
-    cstate = np.zeros(13)
-    work = np.zeros(3)
-    out = {k: np.zeros((n, w)) for k, w in (("pos", 9), ("vel", 9), ("alpha", 2), ("beta", 4), ("cmd", 4),
-                                            ("app", 4), ("meas", 4), ("work", 3))}
-    energy = np.zeros(n)
-    for k0 in range(0, n, CHUNK):
-        k1 = min(n, k0 + CHUNK)
-        run_lifted_chunk(k0, k1, c, g, Ts, settings.plant.substeps, wheel_res, steer_res, u_ff, beta_d, beta_dot_d,
-                         noise.steering, noise.torque, noise.torque_offset, pos, vel, cstate, work,
-                         out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
-                         energy, out["work"])
-        if not np.all(np.isfinite(vel)):
-            raise FloatingPointError(f"simulation of {traj.name!r} diverged at t = {k1 * Ts:.3f} s")
-        if progress is not None:
-            progress(k1, n)
+
+    def step(k0: int, k1: int) -> None:
+        run_lifted_chunk(k0, k1, st.c, st.g, Ts, settings.plant.substeps, st.wheel_res, st.steer_res, st.u_ff,
+                         st.beta_d, beta_dot_d, st.noise.steering, st.noise.torque, st.noise.torque_offset, st.pos,
+                         st.vel, st.cstate, st.work, out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"],
+                         out["app"], out["meas"], st.energy, out["work"])
+
+    run_chunks(traj.name, n, Ts, st, step, progress)
     return SimulationResult(
         traj, platform, plant_params, controller_params, settings, seed,
-        out["pos"], out["vel"], q_dot_d, beta_d, u_ff, out["alpha"], out["beta"],
-        out["cmd"], out["app"], out["meas"], energy, out["work"], np.zeros((n, 4)), lifted=True,
+        out["pos"], out["vel"], st.q_dot_d, st.beta_d, st.u_ff, out["alpha"], out["beta"],
+        out["cmd"], out["app"], out["meas"], st.energy, out["work"], np.zeros((n, 4)), lifted=True,
     )
