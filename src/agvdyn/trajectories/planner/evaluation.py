@@ -1,0 +1,195 @@
+"""Predicted statistics of a sequence: rows kept, information matrix, cond, default sequence for a floor."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from agvdyn.dynamics import projected_regressor
+from agvdyn.kinematics import Mode, joint_motion, kinematic_model
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
+from agvdyn.trajectories.errors import TrajectoryError
+from agvdyn.trajectories.experiments import default_excitation, default_periods, identification_sequence
+from agvdyn.trajectories.fourier import FourierSeries
+from agvdyn.trajectories.limits import FloorSpace, Limits, floor_space, limit_report
+from agvdyn.trajectories.segments import Trajectory
+from agvdyn.trajectories.planner.problem import _row_weights, _sequence
+from agvdyn.trajectories.planner.settings import _OFFSETS, FREE, PlanSettings
+
+if TYPE_CHECKING:
+    pass
+
+
+@dataclass(frozen=True)
+class SequenceEvaluation:
+    """Predicted quality of an identification sequence (exact rows at T_s, the identification's mask).
+
+    ``cond``: cond(Theta_1w^T Theta_1w) of the column-scaled regressor of the ten parameters (eq. 25);
+    ``std``: predicted standard deviations (from the information matrix with the noise levels,
+    motor-torque offsets estimated alongside); ``floor``: the rectangle it occupies (sec. 6.2);
+    ``duration`` s; ``peak_torque`` the largest feed-forward motor torque (N m).
+    """
+
+    cond: float
+    std: dict[str, float]
+    relative_std: dict[str, float]
+    floor: FloorSpace
+    duration: float
+    peak_torque: float
+    correlation: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"cond": self.cond, "std": dict(self.std), "relative_std": dict(self.relative_std),
+                "floor": {"length": self.floor.length, "width": self.floor.width}, "duration": self.duration,
+                "peak_torque": self.peak_torque, "correlation": dict(self.correlation)}
+
+
+def _coordinates(seg) -> list[tuple[int, str]]:
+    if seg.name == "steer_left":
+        return [(0, "alpha_l")]
+    if seg.name == "steer_right":
+        return [(1, "alpha_r")]
+    return list(enumerate(seg.mode.coordinates))
+
+
+def _guarded(keep: np.ndarray, guard: int) -> np.ndarray:
+    """``keep`` with rows within ``guard`` samples of a dropped row or an end dropped too."""
+    if guard <= 0:
+        return keep
+    bad = np.concatenate([np.ones(guard, int), (~keep).astype(int), np.ones(guard, int)])
+    cs = np.concatenate([[0], np.cumsum(bad)])
+    n = keep.size
+    return (cs[2 * guard + 1: 2 * guard + 1 + n] - cs[:n]) == 0
+
+
+def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
+    then the offset columns) and the noise level of each row; ``validity``: the optimiser's smooth
+    weights instead of the mask."""
+    g = traj.geometry
+    n_p = 11 if with_bw else 10
+    guard = int(round(settings.stiction_guard / traj.sample_time))
+    rows, sig = [], []
+    for seg in traj.segments:
+        if seg.lifted:  # no rows of the vehicle
+            continue
+        qd, qdd = joint_motion(g, seg.mode, seg.alpha, seg.s_dot, seg.s_ddot)
+        Y = projected_regressor(g, seg.mode, seg.alpha, qd, qdd)
+        H = kinematic_model(g, seg.mode, seg.alpha)
+        for j, coord in ([(0, "alpha_l"), (1, "alpha_r")] if seg.mode is Mode.PARKING else _coordinates(seg)):
+            v = seg.s_dot[:, j]
+            th = settings.threshold(coord)
+            if validity:
+                sigma, growth = settings.noise.of(coord), settings.noise.growth(coord)
+                keep_w = _row_weights(v, seg.s_ddot[:, j], th, growth, sigma, settings).wF
+                keep = keep_w > 1e-6
+            else:
+                keep = _guarded(np.abs(v) >= th, guard)
+                keep_w = keep.astype(float)
+            if not keep.any():
+                continue
+            offs = g.i_G * H[keep, 5:, j] if settings.torque_offsets else np.zeros((int(keep.sum()), _OFFSETS))
+            block = np.concatenate([Y[keep, j, :n_p], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
+            rows.append(block)
+            sig.append(np.full(int(keep.sum()), settings.noise.of(coord)))
+    if not rows:
+        return np.zeros((0, n_p + _OFFSETS)), np.zeros(0)
+    return np.concatenate(rows), np.concatenate(sig)
+
+
+def _information(A: np.ndarray, sig: np.ndarray, n_p: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    Aw = A / sig[:, None]
+    return Aw.T @ Aw, A[:, :n_p].T @ A[:, :n_p]
+
+
+def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(),
+                      settings: PlanSettings = PlanSettings(), *, estimate_bw: bool = False) -> SequenceEvaluation:
+    """Predicted cond, standard deviations, floor, duration and peak torque of an identification
+    sequence, from its planned motion with the identification's stiction mask and guard.
+
+    ``estimate_bw``: B_w estimated with the others (``identify --fix none``) instead of known; its
+    std is then in ``std`` too (infinite when the motion does not determine it).
+    """
+    names = FREE + (("B_w",) if estimate_bw else ())
+    n_p = len(names)
+    A, sig = _sequence_rows(traj, settings, with_bw=estimate_bw)
+    F, U = _information(A, sig, n_p)
+    free = [i for i in range(F.shape[0]) if F[i, i] > 0]
+    std = np.full(n_p, np.inf)
+    corr: dict[str, float] = {}
+    try:
+        cov = np.linalg.inv(F[np.ix_(free, free)])
+        d = np.sqrt(np.maximum(np.diag(cov), 0))
+        for k, i in enumerate(free):
+            if i < n_p:
+                std[i] = d[k]
+        r = cov / np.outer(d, d)
+        for p_, q_ in (("d_vl", "d_cl"), ("d_vr", "d_cr"), ("d_vw", "d_cw"), ("C_r", "C_ch"), ("C_l", "C_ch")):
+            i, j = free.index(FREE.index(p_)), free.index(FREE.index(q_))
+            corr[f"{p_}/{q_}"] = float(r[i, j])
+    except (np.linalg.LinAlgError, ValueError):
+        pass
+    cond = _cond(U)
+    p = params.to_vector()[:n_p]
+    report = limit_report(traj, params, limits)
+    return SequenceEvaluation(
+        cond=cond, std={n: float(s) for n, s in zip(names, std)},
+        relative_std={n: float(s / abs(v)) for n, s, v in zip(names, std, p)},
+        floor=floor_space(traj), duration=traj.duration, peak_torque=report.peaks["motor_torque"],
+        correlation=corr)
+
+
+def _cond(U: np.ndarray) -> float:
+    diag = np.diag(U)
+    if np.any(diag <= 0):
+        return math.inf
+    d = 1 / np.sqrt(diag)
+    lam = np.linalg.eigvalsh(U * np.outer(d, d))
+    return float(lam[-1] / lam[0]) if lam[0] > 0 else math.inf
+
+
+# --- the default sequence in a given floor and duration --------------------------------------------
+
+def default_for_floor(geom: Geometry = PROTOTYPE, floor: FloorSpace | None = None, duration: float | None = None,
+                      limits: Limits = Limits(), *, settings: PlanSettings = PlanSettings(),
+                      dt: float = SAMPLE_TIME) -> Trajectory:
+    """The default identification sequence (``default_excitation``) fitted into a floor and a duration.
+
+    The straight's excursion is scaled down to the floor length; with another total duration the
+    periods of the four phases are stretched alike (peak rates kept, excursions scaled down where
+    a limit requires it). Without floor and duration: the default sequence itself.
+    """
+    base = identification_sequence(geom, pause=settings.pause, dt=dt, align_rate=settings.align_rate,
+                                   align_acceleration=settings.align_acceleration)
+    if floor is None and duration is None:
+        return replace(base, name="default")
+    aligns = sum(s.duration + dt for s in base.segments if s.name == "align")
+    phases = base.duration - aligns
+    factor = 1.0 if duration is None else (duration - aligns) / phases
+    if factor <= 0.05:
+        raise TrajectoryError(f"duration {duration} s: shorter than the alignments of the sequence ({aligns:.1f} s)")
+    half = math.inf if floor is None else (floor.length - geom.l) / 2
+    if half <= 0:
+        raise TrajectoryError(f"floor length {floor.length:g} m: shorter than the vehicle (l = {geom.l:g} m)")
+    peaks = {"steer_left": (1.5, 0.9), "steer_right": (1.5, 0.9), "straight": (0.8, 2.0), "rotation": (0.7, 1.6)}
+    series = {}
+    for name, (v_peak, q_peak) in peaks.items():
+        s = default_excitation(name)
+        if name == "straight":
+            q_peak = min(q_peak, half)
+        series[name] = FourierSeries.at_rest(s.base_frequency / factor, s.a, s.b, peak_velocity=v_peak,
+                                             peak_excursion=q_peak)
+    traj = _sequence(geom, series, settings, dt, steering_periods=default_periods("steer_left"), name="default")
+    report = limit_report(traj, PAPER_PARAMETERS, limits)
+    if not report.ok:  # a shorter period can break an acceleration limit: scale every phase down to fit
+        worst = min(report.limits[k] / report.peaks[k] for k in report.peaks)
+        series = {k: FourierSeries(v.base_frequency, tuple(np.array(v.a) * worst * 0.99),
+                                   tuple(np.array(v.b) * worst * 0.99)) for k, v in series.items()}
+        traj = _sequence(geom, series, settings, dt, steering_periods=default_periods("steer_left"), name="default")
+    return traj
+
+
+# --- the plan --------------------------------------------------------------------------------------

@@ -1,0 +1,297 @@
+"""plan(): several starts of L-BFGS-B over all phases, the plan and its checks."""
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import scipy.optimize
+
+from agvdyn.kinematics import Mode, nominal_steering
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
+from agvdyn.trajectories.errors import TrajectoryError
+from agvdyn.trajectories.experiments import default_excitation
+from agvdyn.trajectories.fourier import FourierSeries
+from agvdyn.trajectories.limits import FloorSpace, Limits, check_limits
+from agvdyn.trajectories.segments import Trajectory
+from agvdyn.trajectories.planner.evaluation import (
+    SequenceEvaluation,
+    _information,
+    _sequence_rows,
+    default_for_floor,
+    evaluate_sequence,
+)
+from agvdyn.trajectories.planner.problem import _alignments, _Basis, _log_cond, _phase_models, _Problem, _sequence
+from agvdyn.trajectories.planner.settings import PlanSettings, parse_floor
+
+if TYPE_CHECKING:
+    pass
+
+
+@dataclass(frozen=True)
+class PhaseDesign:
+    """One planned phase: its Fourier series (one period, at rest at both ends) and peaks."""
+
+    name: str
+    mode: str
+    coordinate: str
+    duration: float
+    harmonics: int
+    series: FourierSeries
+    peak_position: float
+    peak_velocity: float
+    peak_acceleration: float
+    limiting: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "mode": self.mode, "coordinate": self.coordinate, "duration": self.duration,
+                "harmonics": self.harmonics, "peak_position": self.peak_position,
+                "peak_velocity": self.peak_velocity, "peak_acceleration": self.peak_acceleration,
+                "limiting": self.limiting, "fourier": self.series.to_dict()}
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """Result of :func:`plan`: the planned sequence and its predicted quality next to the default
+    sequence in the same floor and duration (``reference``)."""
+
+    trajectory: Trajectory
+    phases: tuple[PhaseDesign, ...]
+    floor: FloorSpace
+    evaluation: SequenceEvaluation
+    reference: SequenceEvaluation
+    reference_trajectory: Trajectory
+    objective: str
+    objective_value: float
+    starts: tuple[dict[str, Any], ...]
+    elapsed: float
+    params: Parameters
+    settings: PlanSettings
+    limits: Limits
+
+    @property
+    def cond(self) -> float:
+        return self.evaluation.cond
+
+    def to_dict(self) -> dict[str, Any]:
+        """Summary (``agvdyn plan --json``)."""
+        ev = self.evaluation.to_dict()
+        return {
+            "objective": self.objective,
+            "objective_value": self.objective_value,
+            "cond": ev["cond"],
+            "floor": {"length": self.floor.length, "width": self.floor.width},
+            "floor_used": ev["floor"],
+            "duration": ev["duration"],
+            "peak_torque": ev["peak_torque"],
+            "std": ev["std"],
+            "relative_std": ev["relative_std"],
+            "correlation": ev["correlation"],
+            "phases": [p.to_dict() for p in self.phases],
+            "default": {**self.reference.to_dict(), "floor_used": self.reference.to_dict()["floor"]},
+            "starts": list(self.starts),
+            "elapsed_s": self.elapsed,
+            "platform": self.trajectory.geometry.to_dict(),
+        }
+
+    def to_yaml_dict(self) -> dict[str, Any]:
+        """The trajectory file (YAML segments, docs/simulation.md) that ``simulate`` and ``feedforward`` read."""
+        g = self.trajectory.geometry
+        rot = [float(x) for x in nominal_steering(g, Mode.ROTATION)]
+        st = self.settings
+        align = {"pause": st.pause, "rate": st.align_rate, "acceleration": st.align_acceleration}
+        ph = {p.name: p for p in self.phases}
+
+        def series(p: PhaseDesign) -> dict[str, Any]:
+            return {"base_frequency": p.series.base_frequency, "a": list(p.series.a), "b": list(p.series.b)}
+
+        return {
+            "plan": {"objective": self.objective, "cond": self.evaluation.cond,
+                     "floor": {"length": self.floor.length, "width": self.floor.width},
+                     "duration": self.evaluation.duration, "platform": g.to_dict()},
+            "segments": [
+                {"name": "align", "to": [0.0, 0.0], **align},
+                {"name": "steer_left", "mode": "1", "fourier": {"alpha_l": series(ph["steer_left"])}},
+                {"name": "align", "to": [0.0, 0.0], **align},
+                {"name": "steer_right", "mode": "1", "fourier": {"alpha_r": series(ph["steer_right"])}},
+                {"name": "align", "to": [0.0, 0.0], **align},
+                {"name": "straight", "mode": "2s", "fourier": series(ph["straight"])},
+                {"name": "align", "to": rot, **align},
+                {"name": "rotation", "mode": "4", "fourier": series(ph["rotation"])},
+                {"name": "align", "to": [0.0, 0.0], **align},
+            ],
+        }
+
+
+def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:
+    problem_args, x0, k = args
+    problem = _Problem(*problem_args)
+    t0 = time.perf_counter()
+    res = scipy.optimize.minimize(problem, x0, jac=True, method="L-BFGS-B",
+                                  options={"maxiter": problem.settings.max_iterations, "maxcor": 20})
+    msg = str(res.message)
+    F, U, T, _, band = problem.information(res.x)
+    info = {"start": k, "objective": float(res.fun), "iterations": int(res.nit),
+            "harmonics": [b.H for b in problem.bases], "durations": [float(x) for x in T],
+            "cond_smooth": float(np.exp(_log_cond(U)[0])), "penalty_share": float(band), "message": msg,
+            "seconds": time.perf_counter() - t0}
+    return float(res.fun), res.x, [b.H for b in problem.bases], info
+
+
+def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1.6), duration: float | None = None,
+         *, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(),
+         settings: PlanSettings = PlanSettings(), dt: float = SAMPLE_TIME) -> Plan:
+    """Optimal identification sequence (sec. 6.2) for ``geom`` in ``floor`` within ``duration`` s.
+
+    ``duration`` None: the default sequence's (117.6 s on the prototype). ``params``: the nominal
+    parameters for the feed-forward torques of the limit check (eq. 21) and the relative stds.
+    Raises TrajectoryError when the floor cannot hold the vehicle's rotation or straight motion,
+    or the duration is too short for the alignments and four phases.
+    """
+    t_start = time.perf_counter()
+    floor = parse_floor(floor) if isinstance(floor, str) else floor
+    rotation_width = math.hypot(geom.l, geom.b) + 2 * abs(geom.a)
+    if floor.width < rotation_width - 1e-9 or floor.length < rotation_width - 1e-9:
+        raise TrajectoryError(f"floor {floor.length:g} m x {floor.width:g} m: the pure rotation needs a "
+                              f"{rotation_width:.3f} m x {rotation_width:.3f} m square (sqrt(l^2 + b^2) + 2a, sec. 6.2)")
+    default_traj = default_for_floor(geom, None, None, limits, settings=settings, dt=dt)
+    if duration is None:
+        duration = default_traj.duration
+    reference_traj = default_for_floor(geom, floor, duration, limits, settings=settings, dt=dt)
+    reference = evaluate_sequence(reference_traj, params, limits, settings)
+    models = _phase_models(geom, params, floor, limits, settings)
+    aligns = _alignments(geom, settings, dt)
+    align_time = sum(a.n_samples for a in aligns) * dt
+    available = duration - align_time
+    # constant information of the alignments (the identification uses their rows)
+    A0, s0 = _sequence_rows(Trajectory(tuple(aligns[:4]), geom, dt), settings, validity=True)
+    A1, s1 = _sequence_rows(Trajectory((aligns[4],), geom, dt), settings, validity=True)
+    F0, U0 = _information(np.concatenate([A0, A1]), np.concatenate([s0, s1]))
+    F0 = F0 + 1e-12 * np.eye(F0.shape[0])
+    ref_rows, ref_sig = _sequence_rows(reference_traj, settings, validity=True)
+    Fr, _ = _information(ref_rows, ref_sig)
+    try:
+        ref_log = 0.5 * np.log(np.diag(np.linalg.inv(Fr))[:10]) - np.log(np.abs(params.to_vector()[:10]))
+    except np.linalg.LinAlgError:
+        ref_log = None
+    rng = np.random.default_rng(settings.seed)
+    lo, hi = settings.harmonics
+    jobs = []
+    base_share = np.array([24.0, 24.0, 30.0, 30.0])
+    for k in range(settings.starts):
+        share = base_share * np.exp(rng.normal(0, 0.3, 4))
+        T0 = share / share.sum() * available
+        harmonics = []
+        for T in T0:
+            cap = max(lo, int(settings.max_frequency * T / (2 * math.pi)))
+            harmonics.append(int(rng.integers(lo, min(hi, cap) + 1)))
+        t_min = np.array([max(settings.min_phase, 2 * math.pi * H / settings.max_frequency) for H in harmonics])
+        if t_min.sum() >= available:
+            harmonics = [lo] * 4
+            t_min = np.array([max(settings.min_phase, 2 * math.pi * lo / settings.max_frequency)] * 4)
+        grid_points = [max(200, int(math.ceil(2 * T / settings.grid))) for T in T0]
+        frac = np.clip((T0 - t_min) / max(available - t_min.sum(), 1e-9), 1e-3, None)
+        eta0 = np.log(frac / frac.sum())
+        if k % 2 == 0:  # the default excitation's shape on this phase's harmonics, perturbed
+            thetas = [_default_shape(m.name, H, T, n_) * (1 + 0.2 * k / max(settings.starts, 1))
+                      + 0.05 * k / max(settings.starts, 1) * rng.standard_normal(2 * H) / np.tile(np.arange(1, H + 1), 2)
+                      for m, H, T, n_ in zip(models, harmonics, T0, grid_points)]
+        else:
+            thetas = [rng.standard_normal(2 * H) / np.tile(np.arange(1, H + 1), 2) for H in harmonics]
+        x0 = np.concatenate([*thetas, eta0])
+        problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points)
+        jobs.append((problem_args, x0, k))
+    workers = settings.workers or min(2, os.cpu_count() or 1)
+    if workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+            results = list(pool.map(_worker, jobs))
+    else:
+        results = [_worker(job) for job in jobs]
+    best = min(range(len(results)), key=lambda i: results[i][0])
+    fun, x, harmonics, _ = results[best]
+    problem = _Problem(*jobs[best][0])
+    traj, phases = _build(problem, x, geom, params, limits, settings, dt)
+    evaluation = evaluate_sequence(traj, params, limits, settings)
+    return Plan(traj, phases, floor, evaluation, reference, reference_traj, settings.objective, float(fun),
+                tuple(r[3] for r in results), time.perf_counter() - t_start, params, settings, limits)
+
+
+_LIMITING = ("velocity", "acceleration", "excursion", "motor torque")
+
+
+def _default_shape(name: str, H: int, T: float, n: int) -> np.ndarray:
+    """Coefficients (2H,) on the basis of a phase of duration T whose velocity is closest (least
+    squares) to the default excitation of that phase repeated over T (a start of the optimiser)."""
+    series = default_excitation(name)
+    B = _Basis.of(H, n)
+    t = (np.arange(n) + 0.5) / n * T
+    _, v, _ = series.evaluate(t % series.period)
+    coef, *_ = np.linalg.lstsq(B.Cv, v / max(np.max(np.abs(v)), 1e-12), rcond=None)
+    return B.Pi @ coef
+
+
+def _build(problem: _Problem, x: np.ndarray, geom: Geometry, params: Parameters, limits: Limits,
+           settings: PlanSettings, dt: float) -> tuple[Trajectory, tuple[PhaseDesign, ...]]:
+    """The planned trajectory at T_s; a phase whose peaks between grid points break a limit is scaled down."""
+    thetas, eta = problem.split(x)
+    T = problem.durations(eta)
+    series, designs, scales = {}, [], {}
+    for j, m in enumerate(problem.models):
+        B = problem.bases[j]
+        n = max(1, int(round(T[j] / dt)))
+        c = B.Pi @ thetas[j]
+        s, kind, _, _ = problem.scale(j, c, T[j])
+        scales[m.name] = (c, s, kind, n * dt, B.H)
+    for _ in range(5):
+        series = {}
+        for name, (c, s, kind, Tp, H) in scales.items():
+            w = 2 * math.pi / Tp
+            # velocity amplitudes of the basis on u = t / T are the same on t
+            series[name] = FourierSeries(w, tuple(s * c[:H]), tuple(s * c[H:]))
+        traj = _sequence(geom, series, settings, dt)
+        shrink = _violations(traj, params, limits, problem)
+        if not shrink:
+            break
+        for name, f in shrink.items():
+            c, s, kind, Tp, H = scales[name]
+            scales[name] = (c, s * f, kind, Tp, H)
+    check_limits(traj, params, limits)
+    for name, (c, s, kind, Tp, H) in scales.items():
+        seg = next(sg for sg in traj.segments if sg.name == name)
+        col = 1 if name == "steer_right" else 0
+        m = next(mm for mm in problem.models if mm.name == name)
+        designs.append(PhaseDesign(
+            name=name, mode=m.mode.label, coordinate=m.coordinate, duration=seg.duration + dt, harmonics=H,
+            series=series[name], peak_position=float(np.max(np.abs(seg.s[:, col]))),
+            peak_velocity=float(np.max(np.abs(seg.s_dot[:, col]))),
+            peak_acceleration=float(np.max(np.abs(seg.s_ddot[:, col]))), limiting=_LIMITING[kind]))
+    return traj, tuple(designs)
+
+
+def _violations(traj: Trajectory, params: Parameters, limits: Limits, problem: _Problem) -> dict[str, float]:
+    """Per phase, the factor that brings its peaks within the plan's limits (empty: all within)."""
+    out = {}
+    qd, qdd = traj.joint_motion()
+    u = traj.feedforward(params)
+    for (name, sl), seg in zip(traj.segment_slices(), traj.segments):
+        m = next((mm for mm in problem.models if mm.name == name), None)
+        if m is None:
+            continue
+        col = 1 if name == "steer_right" else 0
+        ratios = [m.v_limit / max(np.max(np.abs(seg.s_dot[:, col])), 1e-12),
+                  m.a_limit / max(np.max(np.abs(seg.s_ddot[:, col])), 1e-12),
+                  m.q_limit / max(np.max(np.abs(seg.s[:, col])), 1e-12)]
+        y = np.abs(u[sl]).max()
+        if y > m.torque_limit:
+            ratios.append(m.torque_limit / y)
+        f = min(ratios)
+        if f < 1.0:
+            out[name] = 0.995 * f
+    return out
+
+
+# --- figure ----------------------------------------------------------------------------------------

@@ -1,0 +1,400 @@
+"""The optimisation problem: phase models, Fourier bases, row weights and the objectives with their gradients."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from agvdyn.dynamics import feedforward_torques, projected_regressor
+from agvdyn.kinematics import Mode, joint_motion, kinematic_model, nominal_steering
+from agvdyn.platform import Geometry, Parameters
+from agvdyn.trajectories.errors import TrajectoryError
+from agvdyn.trajectories.experiments import identification_sequence
+from agvdyn.trajectories.fourier import FourierSeries
+from agvdyn.trajectories.limits import FloorSpace, Limits
+from agvdyn.trajectories.segments import Trajectory, alignment
+from agvdyn.trajectories.planner.settings import _OFFSETS, PHASES, PlanSettings
+
+if TYPE_CHECKING:
+    pass
+
+
+@dataclass(frozen=True, eq=False)
+class _PhaseModel:
+    """Constant facts of one phase: rows ``z^T P`` (z = (a, v, sign v, 1)), limits, feed-forward."""
+
+    name: str
+    mode: Mode
+    coordinate: str
+    alpha: np.ndarray       # (2,) steering angles at rest of the phase
+    P: np.ndarray           # (4, 14): rows of eq. (19) per unit a, v, sign v and the offsets
+    sigma: float
+    growth: float
+    threshold: float
+    q_limit: float
+    v_limit: float
+    a_limit: float
+    K: np.ndarray           # (3, 4): motor torque per unit a, v, sign v (eq. 21, nominal parameters)
+    torque_limit: float
+
+
+def _phase_models(geom: Geometry, params: Parameters, floor: FloorSpace, limits: Limits,
+                  settings: PlanSettings) -> list[_PhaseModel]:
+    half_length = (floor.length - geom.l) / 2
+    if half_length <= 0:
+        raise TrajectoryError(f"floor {floor.length:g} m x {floor.width:g} m: shorter than the vehicle "
+                              f"(l = {geom.l:g} m): the straight motion needs l + 2 max|x_ch| <= the floor length")
+    out = []
+    for name, mode in PHASES:
+        alpha = nominal_steering(geom, mode)
+        alpha = np.zeros(2) if alpha is None else np.asarray(alpha, dtype=float)
+        coordinate = "alpha_l" if name == "steer_left" else "alpha_r" if name == "steer_right" else mode.coordinates[0]
+        col = 1 if name == "steer_right" else 0
+        n = mode.dof
+        s_dot = np.zeros((3, n))
+        s_ddot = np.zeros((3, n))
+        s_ddot[0, col] = 1.0
+        s_dot[1, col], s_dot[2, col] = 1.0, 2.0
+        al = np.tile(alpha, (3, 1))
+        qd, qdd = joint_motion(geom, mode, al, s_dot, s_ddot)
+        Y = projected_regressor(geom, mode, al, qd, qdd)[:, col, :10]
+        u = feedforward_torques(geom, params, mode, al, s_dot, s_ddot)
+        H = kinematic_model(geom, mode, al[:1])[0]
+        P = np.zeros((4, 10 + _OFFSETS))
+        P[0, :10] = Y[0]
+        P[1, :10] = Y[2] - Y[1]
+        P[2, :10] = 2 * Y[1] - Y[2]
+        if settings.torque_offsets:
+            P[3, 10:] = geom.i_G * H[5:, col]
+        K = np.stack([u[0], u[2] - u[1], 2 * u[1] - u[2]])
+        wheel = float(np.max(np.abs(H[5:, col])))
+        if mode is Mode.PARKING:
+            q_lim, v_lim, a_lim = settings.steering_excursion, limits.steering_rate, limits.steering_acceleration
+        elif mode is Mode.ROTATION:
+            q_lim, v_lim, a_lim = settings.max_heading, limits.yaw_rate, limits.yaw_acceleration
+        else:
+            q_lim, v_lim = half_length, min(limits.speed, settings.max_speed)
+            a_lim = min(limits.acceleration, settings.max_acceleration)
+        if wheel > 0:
+            v_lim = min(v_lim, limits.wheel_speed / wheel)
+        out.append(_PhaseModel(name, mode, coordinate, alpha, P, settings.noise.of(coordinate),
+                               settings.noise.growth(coordinate), settings.threshold(coordinate), q_lim, v_lim, a_lim, K,
+                               limits.motor_torque * limits.feedforward_share))
+    return out
+
+
+def _alignments(geom: Geometry, settings: PlanSettings, dt: float) -> list:
+    zero = np.zeros(2)
+    rot = nominal_steering(geom, Mode.ROTATION)
+    kw = dict(pause=settings.pause, rate=settings.align_rate, acceleration=settings.align_acceleration, dt=dt)
+    return [alignment(zero, zero, **kw), alignment(zero, zero, **kw), alignment(zero, zero, **kw),
+            alignment(zero, rot, **kw), alignment(rot, zero, **kw)]
+
+
+def _sequence(geom: Geometry, series: dict[str, FourierSeries], settings: PlanSettings, dt: float,
+              steering_periods: int = 1, name: str = "plan") -> Trajectory:
+    traj = identification_sequence(geom, steer_left=series["steer_left"], steer_right=series["steer_right"],
+                                   straight=series["straight"], rotation=series["rotation"],
+                                   steering_periods=steering_periods, pause=settings.pause, dt=dt,
+                                   align_rate=settings.align_rate, align_acceleration=settings.align_acceleration)
+    return replace(traj, name=name)
+
+
+# --- information of a phase from its Fourier coefficients -------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class _Basis:
+    """Fourier basis of one period on a fixed grid ``u = t / T`` in [0, 1): velocity, acceleration
+    times T, position over T; and the projector onto series that start and end at rest."""
+
+    H: int
+    n: int
+    Cv: np.ndarray
+    Ca: np.ndarray
+    Cq: np.ndarray
+    Pi: np.ndarray
+
+    @classmethod
+    def of(cls, H: int, n: int) -> "_Basis":
+        u = (np.arange(n) + 0.5) / n
+        k = np.arange(1, H + 1, dtype=float)
+        ph = 2 * np.pi * np.outer(u, k)
+        s, c = np.sin(ph), np.cos(ph)
+        w = 2 * np.pi * k
+        Cv = np.concatenate([c, s], axis=1)
+        Ca = np.concatenate([-s * w, c * w], axis=1)
+        Cq = np.concatenate([s / w, (1 - c) / w], axis=1)
+        # at rest at both ends: sum a_k = 0, sum k b_k = 0 (orthogonal projector)
+        N = np.zeros((2 * H, 2))
+        N[:H, 0] = 1.0
+        N[H:, 1] = k
+        Q, _ = np.linalg.qr(N)
+        Pi = np.eye(2 * H) - Q @ Q.T
+        return cls(H, n, Cv, Ca, Cq, Pi)
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return 0.5 * (1 + np.tanh(0.5 * x))
+
+
+class _Problem:
+    """The objective and its gradient for one start (fixed harmonics per phase)."""
+
+    def __init__(self, models: list[_PhaseModel], harmonics: list[int], available: float, settings: PlanSettings,
+                 params: np.ndarray, F0: np.ndarray, U0: np.ndarray, reference_log_std: np.ndarray | None,
+                 sample_time: float, grid_points: list[int]):
+        self.models = models
+        self.bases = [_Basis.of(H, n) for H, n in zip(harmonics, grid_points)]
+        self.available = available
+        self.settings = settings
+        self.log_p = np.log(np.abs(params[:10]))
+        self.F0, self.U0 = F0, U0
+        self.ref = reference_log_std
+        self.Ts = sample_time
+        self.t_min = np.array([max(settings.min_phase, 2 * math.pi * H / settings.max_frequency) for H in harmonics])
+        if self.t_min.sum() >= available:
+            raise TrajectoryError(f"{available:.1f} s for the four phases: too short for phases of at least "
+                                  f"{', '.join(f'{x:.1f}' for x in self.t_min)} s; expected a longer --duration")
+        self.sizes = [2 * H for H in harmonics]
+        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)])
+
+    # variables: coefficients of the four phases, then four duration logits
+    def split(self, x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        thetas = [x[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
+        return thetas, x[self.offsets[-1]:]
+
+    def durations(self, eta: np.ndarray) -> np.ndarray:
+        e = np.exp(eta - eta.max())
+        return self.t_min + (self.available - self.t_min.sum()) * e / e.sum()
+
+    def scale(self, j: int, c: np.ndarray, T: float) -> tuple[float, int, int, float]:
+        """Largest scale of the series c within the limits of phase j: (scale, limit index, sample, peak)."""
+        m, B = self.models[j], self.bases[j]
+        v0, a0, q0 = B.Cv @ c, B.Ca @ c / T, T * (B.Cq @ c)
+        cands = []
+        for k, (x, lim) in enumerate(((v0, m.v_limit), (a0, m.a_limit), (q0, m.q_limit))):
+            i = int(np.argmax(np.abs(x)))
+            cands.append((lim / max(abs(x[i]), 1e-12), k, i, x[i]))
+        y = np.outer(a0, m.K[0]) + np.outer(v0, m.K[1])
+        room = m.torque_limit - np.abs(np.outer(np.sign(v0), m.K[2]))
+        ratio = np.where(np.abs(y) > 1e-12, np.maximum(room, 1e-9) / np.maximum(np.abs(y), 1e-12), np.inf)
+        flat = int(np.argmin(ratio))
+        cands.append((float(ratio.flat[flat]), 3, flat, float(y.flat[flat])))
+        best = min(cands, key=lambda c_: c_[0])
+        return best[0] * self.settings.margin, best[1], best[2], best[3]
+
+    def phase_moments(self, j: int, theta: np.ndarray, T: float, want_grad: bool = False):
+        """Moment matrices (4, 4) of phase j in units of T_s rows, noise-weighted (relative to the
+        phase's level) for F and unweighted for U, its penalty time (s; see :func:`_row_weights`),
+        and what the gradient needs."""
+        m, B = self.models[j], self.bases[j]
+        c = B.Pi @ theta
+        s, kind, i_star, peak = self.scale(j, c, T)
+        v0, a0 = B.Cv @ c, B.Ca @ c / T
+        v, a = s * v0, s * a0
+        wts = _row_weights(v, a, m.threshold, m.growth, m.sigma, self.settings)
+        Z = np.stack([a, v, np.sign(v), np.ones_like(v)], axis=1)
+        unit = T / B.n / self.Ts
+        MF = unit * (Z * wts.wF[:, None]).T @ Z
+        MU = unit * (Z * wts.wU[:, None]).T @ Z
+        penalty = T / B.n * float(np.sum(wts.pen))
+        if not want_grad:
+            return MF, MU, penalty, None
+        return MF, MU, penalty, (c, s, kind, i_star, peak, v0, a0, Z, wts, unit, T / B.n)
+
+    def information(self, x: np.ndarray, want_grad: bool = False):
+        thetas, eta = self.split(x)
+        T = self.durations(eta)
+        F, U = self.F0.copy(), self.U0.copy()
+        cache, band = [], 0.0
+        for j, m in enumerate(self.models):
+            MF, MU, b, aux = self.phase_moments(j, thetas[j], T[j], want_grad)  # b: penalty time
+            F += m.P.T @ MF @ m.P / m.sigma**2
+            U += m.P[:, :10].T @ MU @ m.P[:, :10]
+            band += b
+            cache.append(aux)
+        return F, U, T, cache, band / self.available
+
+    def objective(self, x: np.ndarray) -> float:
+        F, U, _, _, band = self.information(x)
+        return self.criterion(F, U)[0] + band
+
+    def criterion(self, F: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Objective J(F, U) and its derivatives dJ/dF (14, 14), dJ/dU (10, 10)."""
+        st = self.settings
+        dF, dU = np.zeros_like(F), np.zeros_like(U)
+        try:
+            Cov = np.linalg.inv(F)
+        except np.linalg.LinAlgError:
+            return 1e6, dF, dU
+        if st.objective == "d-optimal":
+            sign, logdet = np.linalg.slogdet(F)
+            Foo = F[10:, 10:]
+            J = -logdet
+            dF = -Cov
+            if Foo.size:
+                J += np.linalg.slogdet(Foo)[1]
+                dF[10:, 10:] += np.linalg.inv(Foo)
+            return float(J) / 10, dF / 10, dU
+        log_cond, dlc = _log_cond(U)
+        if st.objective == "cond":
+            return log_cond, dF, dlc
+        var = np.diag(Cov)[:10]
+        if np.any(var <= 0):
+            return 1e6, dF, dU
+        log_rel = 0.5 * np.log(var) - self.log_p
+        J = float(np.mean(log_rel))
+        g = np.full(10, 0.1)  # dJ/dlog_rel
+        if self.ref is not None and st.reference_penalty > 0:
+            excess = log_rel - self.ref - math.log(st.reference_margin)
+            sp, dsp = _softplus(excess, 0.05)
+            J += st.reference_penalty * float(np.sum(sp ** 2))
+            g += st.reference_penalty * 2 * sp * dsp
+        sp, dsp = _softplus(np.array([log_cond - math.log(st.cond_target)]), 0.05)
+        J += st.reference_penalty * float(sp[0] ** 2)
+        dU = st.reference_penalty * 2 * sp[0] * dsp[0] * dlc
+        # d log_rel_i = 0.5 dvar_i / var_i ; dvar_i = -(Cov dF Cov)_ii
+        h = np.zeros(F.shape[0])
+        h[:10] = g * 0.5 / var
+        dF = -(Cov * h) @ Cov
+        return J, dF, dU
+
+    def __call__(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        F, U, T, cache, band = self.information(x, want_grad=True)
+        J, dF, dU = self.criterion(F, U)
+        if J >= 1e6:
+            return J, np.zeros_like(x)
+        lam = 1.0 / self.available
+        J += band
+        thetas, eta = self.split(x)
+        grad = np.zeros_like(x)
+        GF, GU = [], []
+        for j, (m, aux) in enumerate(zip(self.models, cache)):
+            Gf = m.P @ dF @ m.P.T / m.sigma**2
+            Gu = m.P[:, :10] @ dU @ m.P[:, :10].T
+            GF.append(0.5 * (Gf + Gf.T))
+            GU.append(0.5 * (Gu + Gu.T))
+            grad[self.offsets[j]:self.offsets[j + 1]] = self._theta_gradient(j, GF[j], GU[j], lam, aux, T[j])
+        # durations: finite differences per phase (the basis lives on t / T, so only scalars change)
+        dJ_dT = np.zeros(4)
+        for j, m in enumerate(self.models):
+            h = 1e-4 * T[j]
+            MFp, MUp, bp, _ = self.phase_moments(j, thetas[j], T[j] + h)
+            MFm, MUm, bm, _ = self.phase_moments(j, thetas[j], T[j] - h)
+            dJ_dT[j] = float(np.sum(GF[j] * (MFp - MFm)) + np.sum(GU[j] * (MUp - MUm)) + lam * (bp - bm)) / (2 * h)
+        e = np.exp(eta - eta.max())
+        sm = e / e.sum()
+        R = self.available - self.t_min.sum()
+        dT_deta = R * (np.diag(sm) - np.outer(sm, sm))
+        grad[self.offsets[-1]:] = dT_deta.T @ dJ_dT
+        return J, grad
+
+    def _theta_gradient(self, j: int, GF: np.ndarray, GU: np.ndarray, lam: float, aux, T: float) -> np.ndarray:
+        m, B = self.models[j], self.bases[j]
+        c, s, kind, i_star, peak, v0, a0, Z, w, unit, dt_row = aux
+        ZF, ZU = Z @ GF, Z @ GU  # (n, 4)
+        qF, qU = np.einsum("ni,ni->n", ZF, Z), np.einsum("ni,ni->n", ZU, Z)
+        g_a = unit * (2 * w.wF * ZF[:, 0] + 2 * w.wU * ZU[:, 0] + w.wF_a * qF + w.wU_a * qU) + lam * dt_row * w.pen_a
+        g_v = unit * (2 * w.wF * ZF[:, 1] + 2 * w.wU * ZU[:, 1] + w.wF_v * qF + w.wU_v * qU) + lam * dt_row * w.pen_v
+        # v = s Cv c, a = s Ca c / T
+        dc = s * (B.Cv.T @ g_v + B.Ca.T @ g_a / T)
+        dJ_ds = float(g_v @ v0 + g_a @ a0)
+        # s = margin * limit / |peak(c)|: ds/dc = -s / peak * dpeak/dc
+        if kind == 0:
+            row = B.Cv[i_star]
+        elif kind == 1:
+            row = B.Ca[i_star] / T
+        elif kind == 2:
+            row = T * B.Cq[i_star]
+        else:
+            i, k = divmod(i_star, 4)
+            row = m.K[0, k] * B.Ca[i] / T + m.K[1, k] * B.Cv[i]
+        dc += dJ_ds * (-s / peak) * row
+        return B.Pi @ dc
+
+
+@dataclass(frozen=True, eq=False)
+class _Weights:
+    """Per-row weights of a phase and their partial derivatives in v and a."""
+
+    wF: np.ndarray
+    wU: np.ndarray
+    pen: np.ndarray
+    wF_v: np.ndarray
+    wF_a: np.ndarray
+    wU_v: np.ndarray
+    wU_a: np.ndarray
+    pen_v: np.ndarray
+    pen_a: np.ndarray
+
+
+def _row_weights(v: np.ndarray, a: np.ndarray, th: float, growth: float, sigma: float, st: PlanSettings
+                 ) -> _Weights:
+    """Weights of the rows of a phase in the information (``wF``: noise-weighted, ``wU``: for cond)
+    and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
+
+    * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
+    * contamination ``k``: a row the identification keeps (more than the guard ``g`` after the
+      velocity passed ``th``) but within ``reversal_window`` of a velocity reversal: there the
+      stick of the reversal, spread by the zero-phase filter, is in the torques. With the
+      acceleration a near the reversal, such rows have ``th + g |a| <= |v| < window |a|``
+      (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
+      ``reversal_penalty`` per share of the time;
+    * the time below the validity speed costs ``band_penalty`` per share;
+    * tyre slip ``r = 1 / (1 + (growth a^2 / sigma)^2)`` (:meth:`NoiseLevels.growth`).
+    """
+    V, A = np.abs(v), np.abs(a)
+    sv, sa = np.sign(v), np.sign(a)
+    v_ok = st.validity * th
+    width = st.validity_width * v_ok
+    wv = _sigmoid((V - v_ok) / width)
+    dwv = wv * (1 - wv) / width
+    g = st.stiction_guard
+    d = 0.2 * th
+    k1 = _sigmoid((V - th - g * A) / d)
+    k2 = _sigmoid((st.reversal_window * A - V) / d)
+    k = k1 * k2
+    dk1 = k1 * (1 - k1) / d
+    dk2 = k2 * (1 - k2) / d
+    k_V = dk1 * k2 - k1 * dk2
+    k_A = -g * dk1 * k2 + st.reversal_window * k1 * dk2
+    if growth > 0:
+        g2 = (growth / sigma) ** 2
+        r = 1 / (1 + g2 * a**4)
+        r_a = -r**2 * 4 * g2 * a**3
+    else:
+        r, r_a = np.ones_like(a), np.zeros_like(a)
+    wU = wv * (1 - k)
+    wU_V = dwv * (1 - k) - wv * k_V
+    wU_A = -wv * k_A
+    wF = wU * r
+    pen = st.band_penalty * (1 - wv) + st.reversal_penalty * k
+    return _Weights(wF=wF, wU=wU, pen=pen, wF_v=sv * wU_V * r, wF_a=sa * wU_A * r + wU * r_a,
+                    wU_v=sv * wU_V, wU_a=sa * wU_A, pen_v=sv * (-st.band_penalty * dwv + st.reversal_penalty * k_V),
+                    pen_a=sa * st.reversal_penalty * k_A)
+
+
+def _softplus(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth max(x, 0) of the given width and its derivative."""
+    y = x / width
+    sp = width * np.logaddexp(0.0, y)
+    return sp, _sigmoid(y)
+
+
+def _log_cond(U: np.ndarray) -> tuple[float, np.ndarray]:
+    """log cond of the column-scaled matrix D U D (D = diag(U)^-1/2) and its derivative in U."""
+    d = 1 / np.sqrt(np.diag(U))
+    S = U * np.outer(d, d)
+    lam, V = np.linalg.eigh(S)
+    out = np.zeros_like(U)
+    for idx, sign in ((-1, 1.0), (0, -1.0)):
+        v = V[:, idx]
+        dv = d * v
+        grad = np.outer(dv, dv) - lam[idx] * np.diag(v**2 * d**2)
+        out += sign * grad / lam[idx]
+    return float(np.log(lam[-1] / lam[0])), out
+
+
+# --- exact evaluation of a sequence ----------------------------------------------------------------

@@ -1,0 +1,188 @@
+"""Objectives, noise levels and settings of the planner, floor parsing."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+
+from agvdyn.kinematics import Mode
+from agvdyn.platform import PARAMETER_NAMES
+from agvdyn.trajectories.errors import TrajectoryError
+from agvdyn.trajectories.limits import FloorSpace
+
+if TYPE_CHECKING:
+    pass
+
+
+#: Objectives of :func:`plan`.
+OBJECTIVES = ("std", "d-optimal", "cond")
+Objective = Literal["std", "d-optimal", "cond"]
+
+#: The four phases of sec. 6.2 in their execution order: (name, mode).
+PHASES: tuple[tuple[str, Mode], ...] = (
+    ("steer_left", Mode.PARKING), ("steer_right", Mode.PARKING), ("straight", Mode.STRAIGHT),
+    ("rotation", Mode.ROTATION),
+)
+#: The ten parameters the sequence identifies (B_w is known, sec. 6.3).
+FREE = PARAMETER_NAMES[:10]
+_OFFSETS = 4
+
+
+@dataclass(frozen=True)
+class NoiseLevels:
+    """Effective noise of one row of eq. (19) (2 ms rows) per generalized coordinate: N m for the
+    steering and the yaw, N for x_ch and y_ch.
+
+    Translations add tyre slip: the level of an x_ch or y_ch row grows as
+    ``sqrt(x_ch^2 + (slip a^2)^2)`` with the chassis acceleration a (:meth:`growth`).
+
+    The defaults are the residual RMS of each coordinate in the identification of the default
+    sequence on the simulator (0.17, 0.22 N m steering, 1.55 N straight, 1.16 N m rotation), times
+    the square root of the variance inflation of the HAC uncertainty over the classic one (about
+    4 for the steering, 7 for the chassis: the residuals are correlated over ~0.2 s). With them
+    the predicted standard deviations of the default sequence match the HAC ones of
+    ``agvdyn identify`` within about 30 %. Only their ratios matter for the plan.
+    """
+
+    alpha_l: float = 0.7
+    alpha_r: float = 0.85
+    alpha_v: float = 0.8
+    x_ch: float = 12.0
+    y_ch: float = 12.0
+    gamma_ch: float = 8.4
+    slip: float = 55.0
+
+    def __post_init__(self) -> None:
+        for key, value in self.__dict__.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise TrajectoryError(f"noise level {key}={value!r}: expected a finite number >= 0")
+            if key != "slip" and value == 0:
+                raise TrajectoryError(f"noise level {key}={value!r}: expected a finite number > 0")
+
+    def of(self, coordinate: str) -> float:
+        return float(getattr(self, coordinate))
+
+    def growth(self, coordinate: str) -> float:
+        """Growth of the row noise with the square of the acceleration (N per (m/s^2)^2): x_ch and
+        y_ch only. The tyres slip in proportion to the force they transmit, so the odometry (wheel
+        angles) sees ``a (1 + slip)``: a model error of about ``7 a^2`` N RMS on the simulator's
+        straight motion (``slip`` is that, times the same HAC factor as the levels)."""
+        return self.slip if coordinate in ("x_ch", "y_ch") else 0.0
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """Settings of :func:`plan` (all tuning constants in one frozen place).
+
+    objective : ``std`` (default), ``d-optimal`` or ``cond`` (see the module docstring).
+    starts : random starts of the optimiser; ``seed`` their generator; ``workers`` processes
+        (None: up to two, one per core).
+    harmonics : (fewest, most) harmonics of a phase; each start draws them per phase, capped so
+        that the highest harmonic stays below ``max_frequency`` (rad/s, well inside the
+        identification filter's 40 rad/s).
+    min_phase : shortest phase, s.
+    steering_excursion : largest |alpha| of the steering phases, rad (stops at pi/2).
+    max_heading : largest |gamma_ch| of the rotation, rad.
+    max_speed : largest chassis speed of the straight motion, m/s (below ``Limits.speed``): faster,
+        tyre scrub and slip put slowly varying errors into the straight's rows (on the simulator the
+        HAC std of m_ch grew 1.5x at 1.4 m/s although the prediction fell).
+    max_acceleration : largest chassis acceleration of the straight motion, m/s^2 (below
+        ``Limits.acceleration``), for the same reason (tyre slip grows with the force).
+    reference_margin : the ``std`` objective penalises a predicted std above ``reference_margin``
+        times the default sequence's: the prediction of the chassis rows is optimistic where a plan
+        leaves the default's regime (slowly varying tyre errors inflate the HAC std).
+    steering_threshold, stiction_threshold, stiction_guard : the identification's stiction
+        thresholds (rad/s steering; m/s, rad/s chassis) and guard (s) used to predict which rows
+        it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05, 2 / 40 rad/s).
+    validity : rows count in the objective from ``validity`` times the threshold on (smooth step
+        of relative width ``validity_width``): slow motion is where the friction model is least true.
+    band_penalty : weight of the share of the phases' time spent below that speed.
+    reversal_window, reversal_penalty : rows within ``reversal_window`` s of a velocity reversal
+        that the identification keeps carry the reversal's stick/slip, spread by its zero-phase
+        filter (on the simulator they biased C_l, C_r by -3 to -11 %); they earn no credit and
+        their share of the time costs ``reversal_penalty`` (see :func:`_row_weights`).
+    cond_target, reference_penalty : the ``std`` objective's penalties (see the module docstring),
+        ``reference_penalty`` the weight of both.
+    margin : share of every limit the plan may use (the rest for tracking and rounding).
+    pause, align_rate, align_acceleration : the alignments at rest between the phases.
+    grid : time step of the optimiser's evaluation, s (the result is evaluated at ``T_s``).
+    max_iterations : of L-BFGS-B per start.
+    noise : :class:`NoiseLevels`. torque_offsets : the identification estimates motor-torque offsets.
+    """
+
+    objective: str = "std"
+    starts: int = 6
+    seed: int = 0
+    workers: int | None = None
+    harmonics: tuple[int, int] = (4, 30)
+    max_frequency: float = 10.0
+    min_phase: float = 6.0
+    steering_excursion: float = 1.2
+    max_heading: float = math.pi
+    max_speed: float = 0.8
+    max_acceleration: float = 0.6
+    reference_margin: float = 0.7
+    steering_threshold: float = 0.1
+    stiction_threshold: float = 0.05
+    stiction_guard: float = 0.05
+    validity: float = 2.0
+    validity_width: float = 0.15
+    band_penalty: float = 0.5
+    reversal_window: float = 0.25
+    reversal_penalty: float = 10.0
+    cond_target: float = 6.0
+    reference_penalty: float = 20.0
+    margin: float = 0.97
+    pause: float = 0.5
+    align_rate: float = 0.8
+    align_acceleration: float = 2.0
+    grid: float = 0.02
+    max_iterations: int = 300
+    noise: NoiseLevels = field(default_factory=NoiseLevels)
+    torque_offsets: bool = True
+
+    def __post_init__(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise TrajectoryError(f"objective {self.objective!r}: expected one of {list(OBJECTIVES)}")
+        if not (isinstance(self.starts, int) and self.starts >= 1):
+            raise TrajectoryError(f"starts={self.starts!r}: expected an integer >= 1")
+        lo, hi = self.harmonics
+        if not (isinstance(lo, int) and isinstance(hi, int) and 2 <= lo <= hi):
+            raise TrajectoryError(f"harmonics={self.harmonics!r}: expected two integers 2 <= fewest <= most")
+        for key in ("max_frequency", "min_phase", "steering_excursion", "max_heading", "max_speed", "max_acceleration",
+                    "reference_margin", "steering_threshold",
+                    "stiction_threshold", "validity", "validity_width", "cond_target", "margin", "align_rate",
+                    "align_acceleration", "grid"):
+            value = getattr(self, key)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number > 0")
+        for key in ("stiction_guard", "pause", "reference_penalty", "band_penalty", "reversal_window",
+                    "reversal_penalty"):
+            value = getattr(self, key)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number >= 0")
+        if self.margin > 1:
+            raise TrajectoryError(f"margin={self.margin!r}: expected a share of the limits in (0, 1]")
+        if self.steering_excursion >= math.pi / 2:
+            raise TrajectoryError(f"steering_excursion={self.steering_excursion!r}: expected < pi/2 (the stops)")
+        if self.workers is not None and not (isinstance(self.workers, int) and self.workers >= 1):
+            raise TrajectoryError(f"workers={self.workers!r}: expected an integer >= 1 or None")
+
+    def threshold(self, coordinate: str) -> float:
+        return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
+
+
+def parse_floor(text: str) -> FloorSpace:
+    """``"5.2x1.6"`` (metres, length along the straight motion x width) as a :class:`FloorSpace`."""
+    parts = str(text).lower().replace("*", "x").replace(" ", "").split("x")
+    try:
+        length, width = (float(p) for p in parts)
+    except ValueError:
+        raise TrajectoryError(f"floor {text!r}: expected LENGTHxWIDTH in metres, e.g. 5.2x1.6") from None
+    if not (math.isfinite(length) and math.isfinite(width) and length > 0 and width > 0):
+        raise TrajectoryError(f"floor {text!r}: expected a length and a width > 0 m")
+    return FloorSpace(length, width)
+
+
+# --- the linear structure of a phase ---------------------------------------------------------------
