@@ -18,18 +18,17 @@ from agvdyn.io._convert import (
     segments_from_ranges,
     uniform_grid,
 )
-from agvdyn.io.log import (
+from agvdyn.io.log import Log, read_table
+from agvdyn.io.schema import (
     MAX_GAP_SAMPLES,
     MAX_SAMPLE_TIME,
     SEGMENT_COLUMN,
     STOP_TOLERANCE,
-    Log,
     LogError,
     _check,
     _numeric_column,
     _row_text,
     _time_text,
-    read_table,
 )
 from agvdyn.io.mapping import InputKind, LogMapping, MappingError, SegmentColumn, TimeUnit, gear_ratio
 
