@@ -17,13 +17,13 @@ from collections.abc import Callable
 import numpy as np
 
 from agvdyn.platform import Geometry, Parameters
-from agvdyn.simulation._kernels import run_lifted_chunk
+from agvdyn.simulation._lifted_kernels import run_lifted_chunk
 from agvdyn.simulation._setup import prepare_run, run_chunks
 from agvdyn.trajectories import Trajectory
 
 __all__ = ["simulate_lifted"]
 
-#: Size of the controller state of the lifted-wheel kernel (``_kernels.run_lifted_chunk``).
+#: Size of the controller state of the lifted-wheel kernel (``_lifted_kernels.run_lifted_chunk``).
 LIFTED_STATE_SIZE = 13
 
 
