@@ -2,13 +2,10 @@
 speed loop; the plant constants, friction and sensors are those of :mod:`agvdyn.simulation._kernels`."""
 from __future__ import annotations
 
-
 import numpy as np
 from numba import njit
 
 from agvdyn.simulation._kernels import _BW, _DCW, _DVW, _IG, _TLIM, _friction_terms, read_sensors
-
-# --- lifted wheels: the single-axis experiment of sec. 7 (see lifted.py) ---
 
 @njit(cache=True)
 def run_lifted_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res, u_ff, beta_d, beta_dot_d,
