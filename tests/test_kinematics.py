@@ -18,11 +18,11 @@ from agvdyn.kinematics import (
     kinematic_model,
     kinematic_model_dot,
     max_virtual_angle,
-    odometry,
     steering_from_virtual,
     steering_from_virtual_derivatives,
     virtual_from_steering,
 )
+from agvdyn.odometry import odometry
 from agvdyn.platform import PROTOTYPE
 from conftest import configurations, geometries, modes
 

@@ -318,33 +318,36 @@ void Model::motion(const Setpoint& sp, const Matrix92& H, const Matrix92& dH, Jo
   }
 }
 
-Status Model::joint_motion(const Setpoint& sp, JointMotion& jm) const noexcept {
+Status Model::prepare(const Setpoint& sp, Matrix92& H, JointMotion& jm) const noexcept {
   const Status status = check(sp);
   if (status != Status::ok) {
     jm.q_dot.setZero();
     jm.q_ddot.setZero();
     return status;
   }
-  Matrix92 H, dH;
+  Matrix92 dH;
   kinematics(sp.mode, sp.alpha, H, dH);
   motion(sp, H, dH, jm);
   return Status::ok;
+}
+
+Status Model::joint_motion(const Setpoint& sp, JointMotion& jm) const noexcept {
+  Matrix92 H;
+  return prepare(sp, H, jm);
 }
 
 Status Model::feedforward(const Setpoint& sp, Vector4& u, JointMotion* out) const noexcept {
   JointMotion local;
   JointMotion& jm = out != nullptr ? *out : local;
   u.setZero();
-  Status status = check(sp);
-  if (status == Status::ok && !steerable_ && sp.mode != Mode::lateral) status = Status::singular;
-  if (status != Status::ok) {
+  Matrix92 H;
+  const Status status = prepare(sp, H, jm);
+  if (status != Status::ok) return status;
+  if (!steerable_ && sp.mode != Mode::lateral) {
     jm.q_dot.setZero();
     jm.q_ddot.setZero();
-    return status;
+    return Status::singular;
   }
-  Matrix92 H, dH;
-  kinematics(sp.mode, sp.alpha, H, dH);
-  motion(sp, H, dH, jm);
   const Vector9 f = forces(jm);
   // g = N^T f on the admissible basis N = [H_1, chassis column] (dynamics.feedforward_torques)
   const Vector2 g1 = H1_.transpose() * f;

@@ -132,6 +132,8 @@ class Model {
 
  private:
   Status check(const Setpoint& setpoint) const noexcept;
+  // check, then H_k and the joint motion of eq. (4), (20); zero motion on a bad setpoint
+  Status prepare(const Setpoint& setpoint, Eigen::Matrix<double, 9, 2>& H, JointMotion& motion) const noexcept;
   void kinematics(Mode mode, const Vector2& alpha, Eigen::Matrix<double, 9, 2>& H,
                   Eigen::Matrix<double, 9, 2>& dH) const noexcept;
   void motion(const Setpoint& setpoint, const Eigen::Matrix<double, 9, 2>& H, const Eigen::Matrix<double, 9, 2>& dH,

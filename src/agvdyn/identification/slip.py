@@ -1,7 +1,7 @@
 """Wheel slip from the redundant rolling constraints (eq. 1-3).
 
 Eight rolling constraints over-determine the three chassis velocities; the least-squares
-residual of eq. (3) per wheel (:func:`agvdyn.kinematics.odometry_with_slip`, m/s) is zero for a
+residual of eq. (3) per wheel (:func:`agvdyn.odometry.odometry_with_slip`, m/s) is zero for a
 vehicle that rolls and grows where a wheel spins or slides. Rows whose slip speed exceeds a
 threshold taken from the residual's robust spread are wheel slip: they are dropped, with a
 guard, and each event is reported.

@@ -18,7 +18,7 @@ import numpy as np
 
 from agvdyn.dynamics import regressor_signals
 from agvdyn.identification.settings import Filtering, IdentificationSettings
-from agvdyn.kinematics import odometry_with_slip
+from agvdyn.odometry import odometry_with_slip
 from agvdyn.platform import Geometry
 from agvdyn.signals import filtered_derivatives, lowpass, time_derivative, uniform_sample_time
 

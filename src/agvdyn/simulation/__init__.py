@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from agvdyn.kinematics import odometry
+from agvdyn.odometry import odometry
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
 from agvdyn.simulation._kernels import contact_points, run_chunk, slip_speeds
 from agvdyn.simulation.controller import STATE_SIZE, ControllerSettings
