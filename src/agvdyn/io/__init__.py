@@ -20,7 +20,8 @@ from agvdyn.io.log import (
     sidecar_platform,
     write_log,
 )
-from agvdyn.io.mapping import LogMapping, MappingError, Signal, mapping_from_dict, read_mapping
+from agvdyn.io.mapping import LogMapping, MappingError, Signal
+from agvdyn.io.mapping_file import mapping_from_dict, read_mapping
 from agvdyn.io.table import read_mapped_table
 
 __all__ = [

@@ -334,7 +334,7 @@ def write_bag(
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     from agvdyn.io.log import sidecar_platform
-    from agvdyn.io.mapping import read_mapping
+    from agvdyn.io.mapping_file import read_mapping
 
     path = Path(path)
     if not isinstance(mapping, LogMapping):

@@ -6,7 +6,8 @@ from pathlib import Path
 
 from agvdyn.io.bag import is_bag, read_bag
 from agvdyn.io.log import LOG_SUFFIXES, MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, read_log
-from agvdyn.io.mapping import InputKind, LogMapping, read_mapping
+from agvdyn.io.mapping import InputKind, LogMapping
+from agvdyn.io.mapping_file import read_mapping
 from agvdyn.io.table import read_mapped_table
 from agvdyn.platform import Geometry, read_platform
 
