@@ -19,7 +19,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from agvdyn.identification.estimators import ESTIMATORS, make_estimator  # noqa: E402
-from agvdyn.identification.uncertainty import RowIndex, UncertaintyMethod, parameter_uncertainty  # noqa: E402
+from agvdyn.identification.normal import RegressionData, RowIndex
+from agvdyn.identification.uncertainty import UncertaintyMethod, parameter_uncertainty  # noqa: E402
 
 
 def system(m: int, seed: int = 0):
@@ -54,7 +55,7 @@ def main() -> None:
         print(f"estimator {name:8s} {dt * per:7.3f} s per 10^6 rows{extra}")
     for method in UncertaintyMethod:
         t0 = time.perf_counter()
-        unc = parameter_uncertainty(method, fitted["wls"], A, y, index)
+        unc = parameter_uncertainty(method, fitted["wls"], RegressionData.from_rows(A, y, index))
         dt = time.perf_counter() - t0
         bw = unc.details.get("bandwidth_steps", "-")
         print(f"uncertainty {method.value:9s} {dt * per:7.3f} s per 10^6 rows (bandwidth {bw})")

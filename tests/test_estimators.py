@@ -10,7 +10,8 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 from agvdyn.identification import IdentificationSettings, identify
 from agvdyn.identification.estimators import Bounded, LeastSquares, Robust, WeightedLeastSquares, make_estimator
-from agvdyn.identification.uncertainty import RowIndex, correlation_time, parameter_uncertainty
+from agvdyn.identification.normal import RegressionData, RowIndex
+from agvdyn.identification.uncertainty import correlation_time, parameter_uncertainty
 from agvdyn.io import Log
 from agvdyn.simulation import SLIP_SCENARIO, PlantSettings, SimulationSettings, simulate
 
@@ -77,7 +78,7 @@ def test_hac_against_the_known_long_run_variance(phi, seed):
     A = np.ones((n, 1))
     est = LeastSquares().fit(A, 3.0 + e)
     exact = math.sqrt((1 + phi) / (1 - phi) / n)
-    hac = parameter_uncertainty("hac", est, A, 3.0 + e, _index(n)).std[0]
+    hac = parameter_uncertainty("hac", est, RegressionData.from_rows(A, 3.0 + e, _index(n))).std[0]
     assert hac == pytest.approx(exact, rel=0.25)
     assert est.std_[0] == pytest.approx(1 / math.sqrt(n), rel=0.05)
     tau = correlation_time([e[:, None]])[0]
@@ -91,8 +92,8 @@ def test_bootstrap_agrees_with_hac_on_correlated_residuals():
     e = np.convolve(rng.standard_normal(n + 99), np.ones(100) / 10, mode="valid")
     y = A @ [1.0, 2.0] + e
     est = LeastSquares().fit(A, y)
-    hac = parameter_uncertainty("hac", est, A, y, _index(n))
-    boot = parameter_uncertainty("bootstrap", est, A, y, _index(n), replicates=400)
+    hac = parameter_uncertainty("hac", est, RegressionData.from_rows(A, y, _index(n)))
+    boot = parameter_uncertainty("bootstrap", est, RegressionData.from_rows(A, y, _index(n)), replicates=400)
     assert boot.std == pytest.approx(hac.std, rel=0.2)
     assert np.all(hac.std > 3 * est.std_)  # correlation time ~100 samples
 

@@ -118,8 +118,10 @@ def base_parameters_of(regressor: np.ndarray, *, tolerance: float = QR_TOLERANCE
     if not tolerance > 0:
         raise ValueError(f"tolerance={tolerance!r}: expected > 0")
     rank_of = {n: i for i, n in enumerate(order)} if order is not None else {}
-    perm = sorted(range(len(names)), key=lambda i: rank_of.get(names[i], len(rank_of)))
     norms = np.sqrt(np.einsum("ij,ij->j", Y, Y))
+    # zero columns stay out of the QR: without pivoting they would take a Householder step (a row)
+    # that the next column needs
+    perm = sorted((i for i in range(len(names)) if norms[i] > 0), key=lambda i: rank_of.get(names[i], len(rank_of)))
     scale = np.where(norms > 0, norms, 1.0)
     R = triangular_factor((Y / scale)[:, perm])
     relative = np.zeros(len(names))

@@ -74,8 +74,13 @@ class Estimator(ABC):
 
     ``fit(A, y, groups=None, names=None)``: stacked regressor of the free parameters and the
     right-hand side of eq. (24); ``groups`` (m,) the generalized coordinate of each row (weights
-    and scales are per group), ``names`` the parameters of the columns.
+    and scales are per group), ``names`` the parameters of the columns. Pseudo-rows with the
+    normal equations of the stacked rows (:mod:`agvdyn.identification.normal`) are given with
+    ``group_rows`` (stacked rows per group) and ``n_rows`` (all stacked rows); estimators that
+    need every residual (``robust``) refuse them (``needs_rows``).
     """
+
+    needs_rows: bool = False
 
     name: str = ""
     coef_: np.ndarray
@@ -84,7 +89,8 @@ class Estimator(ABC):
 
     @abstractmethod
     def fit(self, A: np.ndarray, y: np.ndarray, *, groups: np.ndarray | None = None,
-            names: Sequence[str] | None = None) -> "Estimator":
+            names: Sequence[str] | None = None, group_rows: np.ndarray | None = None,
+            n_rows: int | None = None) -> "Estimator":
         ...
 
     @property
@@ -97,9 +103,10 @@ class Estimator(ABC):
             raise RuntimeError(f"{type(self).__name__} is not fitted: call fit(A, y) first")
 
     def _finish(self, A: np.ndarray, y: np.ndarray, coef: np.ndarray, bread: np.ndarray, w: np.ndarray,
-                cond: float, cond_raw: float) -> None:
+                cond: float, cond_raw: float, n_rows: int | None = None) -> None:
         """Set the common results; classic covariance ``s^2 (A^T W A)^-1``, ``s^2 = r^T W r / (m - n)``."""
         m, n = A.shape
+        m = m if n_rows is None else n_rows
         r = y - A @ coef
         s2 = float(r @ (w * r)) / (m - n)
         self.coef_, self.bread_, self.weights_, self.residual_ = coef, bread, w, r
@@ -122,19 +129,18 @@ class LeastSquares(Estimator):
 
     name = "ols"
 
-    def fit(self, A, y, *, groups=None, names=None) -> "LeastSquares":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "LeastSquares":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         coef, bread, cond, raw = _weighted_fit(A, y, None)
-        self._finish(A, y, coef, bread, np.ones(A.shape[0]), cond, raw)
+        self._finish(A, y, coef, bread, np.ones(A.shape[0]), cond, raw, n_rows)
         return self
 
 
-def _group_variance(r: np.ndarray, groups: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """Residual variance of each group (mean square; weighted by ``weights`` when given)."""
+def _group_variance(r: np.ndarray, groups: np.ndarray, group_rows: np.ndarray | None = None) -> np.ndarray:
+    """Residual variance of each group (mean square over its ``group_rows`` stacked rows)."""
     k = int(groups.max()) + 1 if groups.size else 1
-    w = np.ones_like(r) if weights is None else weights
-    num = np.bincount(groups, weights=w * r * r, minlength=k)
-    den = np.bincount(groups, weights=w, minlength=k)
+    num = np.bincount(groups, weights=r * r, minlength=k)
+    den = np.bincount(groups, minlength=k) if group_rows is None else np.asarray(group_rows, dtype=float)
     return np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
 
 
@@ -148,21 +154,21 @@ class WeightedLeastSquares(Estimator):
         self.max_iter = max_iter
         self.tol = tol
 
-    def fit(self, A, y, *, groups=None, names=None) -> "WeightedLeastSquares":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "WeightedLeastSquares":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         g = _group_codes(groups, A.shape[0])
         coef, *_ = _weighted_fit(A, y, None)
-        var = _group_variance(y - A @ coef, g)
+        var = _group_variance(y - A @ coef, g, group_rows)
         for self.n_iter_ in range(1, self.max_iter + 1):
             w = 1.0 / np.maximum(var[g], 1e-300)
             coef, bread, cond, raw = _weighted_fit(A, y, w)
-            new = _group_variance(y - A @ coef, g)
+            new = _group_variance(y - A @ coef, g, group_rows)
             done = np.max(np.abs(new / var - 1)) < self.tol
             var = new
             if done:
                 break
         self.group_variance_ = var
-        self._finish(A, y, coef, bread, w, cond, raw)
+        self._finish(A, y, coef, bread, w, cond, raw, n_rows)
         return self
 
 
@@ -172,6 +178,7 @@ class Robust(Estimator):
     the coordinate's inverse variance. ``downweighted_`` (m,) marks rows with weight below half."""
 
     name = "robust"
+    needs_rows = True
 
     def __init__(self, loss: Literal["huber", "tukey"] = "tukey", c: float | None = None, max_iter: int = 30,
                  tol: float = 1e-6) -> None:
@@ -190,7 +197,9 @@ class Robust(Estimator):
             return np.where(np.abs(u) < c, (1 - (u / c) ** 2) ** 2, 0.0)
         raise ValueError(f"robust loss {self.loss!r}: expected 'huber' or 'tukey'")
 
-    def fit(self, A, y, *, groups=None, names=None) -> "Robust":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "Robust":
+        if group_rows is not None:
+            raise ValueError("the robust estimator weighs every row: give it the stacked rows, not pseudo-rows")
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         g = _group_codes(groups, A.shape[0])
         k = int(g.max()) + 1
@@ -226,7 +235,7 @@ class Bounded(Estimator):
     def __init__(self, bounds: Mapping[str, tuple[float, float]] | None = None) -> None:
         self.bounds = bounds
 
-    def fit(self, A, y, *, groups=None, names=None) -> "Bounded":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "Bounded":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         names = list(names) if names is not None else [f"p{i}" for i in range(A.shape[1])]
         table = {**PHYSICAL_BOUNDS, **dict(self.bounds or {})}
@@ -235,7 +244,7 @@ class Bounded(Estimator):
         if np.any(low > high):
             bad = [n for n, a, b in zip(names, low, high) if a > b]
             raise ValueError(f"bounds of {bad}: lower bound above upper bound")
-        wls = WeightedLeastSquares().fit(A, y, groups=groups)
+        wls = WeightedLeastSquares().fit(A, y, groups=groups, group_rows=group_rows, n_rows=n_rows)
         w = wls.weights_
         sw = np.sqrt(w)
         norms = column_norms(A * sw[:, None])
@@ -255,7 +264,7 @@ class Bounded(Estimator):
         else:
             cond = raw = math.nan
         self.active_ = tuple(nm for nm, a in zip(names, active) if a)
-        self._finish(A, y, coef, bread, w, cond, raw)
+        self._finish(A, y, coef, bread, w, cond, raw, n_rows)
         return self
 
 

@@ -31,7 +31,8 @@ import numpy as np
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import filtered_stretch, log_source, min_stretch_rows, stretch_bounds
-from agvdyn.identification.uncertainty import RowIndex, parameter_uncertainty
+from agvdyn.identification.normal import RegressionData, RowIndex
+from agvdyn.identification.uncertainty import parameter_uncertainty
 from agvdyn.platform import PARAMETER_UNITS, WHEELS, Geometry
 from agvdyn.signals import guarded_mask
 
@@ -235,7 +236,7 @@ def identify_lifted(logs: Sequence[Any], geometry: Geometry, *,
     A_, names = A_[:, present], [names[j] for j in present]
     est = (estimator if estimator is not None else settings.make_estimator()).fit(A_, y_, groups=wheel_, names=names)
     index = RowIndex(wheel_.astype(np.int64), tuple(WHEELS), rec_.astype(np.int64), step_.astype(np.int64))
-    unc = parameter_uncertainty(settings.uncertainty, est, A_, y_, index, bandwidth=settings.bandwidth,
+    unc = parameter_uncertainty(settings.uncertainty, est, RegressionData.from_rows(A_, y_, index), bandwidth=settings.bandwidth,
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
                                 replicates=settings.bootstrap_replicates, seed=settings.seed)
     sd = unc.std

@@ -20,13 +20,20 @@ from agvdyn.identification.plausibility import (
     implausible_parameters,
     overall_rms,
 )
+from agvdyn.identification.normal import (
+    RegressionData,
+    RowStatistics,
+    RowStore,
+    regression_data,
+    row_statistics,
+    stacked_regression_data,
+)
 from agvdyn.identification.regression import (
     Dependency,
     Estimator,
     UnidentifiableError,
     column_norms,
     dependent_parameters,
-    stacked_rows,
     variance_inflation,
 )
 from agvdyn.identification.uncertainty import parameter_uncertainty
@@ -84,45 +91,55 @@ def _check_fixed(fixed: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
-def _residual_rms(blocks: Sequence[EquationBlock], p: np.ndarray, offsets: np.ndarray | None = None
-                  ) -> dict[str, float]:
-    """RMS of tau - Theta p over the kept rows per "segment:coordinate" (runs of equal name pooled);
-    coordinates with no kept row (e.g. the resting side while the other one steers) are left out."""
-    sums: dict[str, list[float]] = {}
-    for b in blocks:
-        r = b.torque - b.model_torque(p, offsets)
-        for j, coord in enumerate(b.coordinates):
-            sel = r[b.keep[:, j], j]
-            if sel.size:
-                acc = sums.setdefault(f"{b.segment}:{coord}", [0.0, 0])
-                acc[0] += float(sel @ sel)
-                acc[1] += sel.size
-    return {k: math.sqrt(s / n) for k, (s, n) in sums.items()}
+def _columns(fixed: Mapping[str, float], with_offsets: bool) -> tuple[list[str], list[str], list[int], np.ndarray]:
+    """All column names, the free ones, their indices and the values of the fixed ones (eq. 24)."""
+    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else [])
+    free = [n for n in names if n not in fixed]
+    p_fixed = np.zeros(len(names))
+    for name, value in fixed.items():
+        p_fixed[names.index(name)] = value
+    return names, free, [names.index(n) for n in free], p_fixed
 
 
 def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
                settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
-               sources: Iterable[str] = (), notes: Iterable[str] = (), n_samples: int | None = None,
-               rows: RowCounts | None = None, slip_events: Sequence[SlipEvent] = (),
-               slip_thresholds: Mapping[str, float] | None = None) -> Identification:
-    """Regression stage: stack the blocks (eq. 22), fixed parameters to the right (eq. 24), rank
-    check naming what is not excited, scaled least squares (eq. 25), physical plausibility."""
+               stacked: bool = False, **account: Any) -> Identification:
+    """Regression stage on equation blocks: by their normal equations (pseudo-rows, as
+    :func:`identify`), or with ``stacked=True`` on all rows stacked in memory (the reference).
+    ``account``: sources, notes, n_samples, rows, slip_events, slip_thresholds of the result."""
     fixed = _check_fixed(fixed)
     blocks = tuple(blocks)
+    _, _, idx_free, p_fixed = _columns(fixed, settings.torque_offsets)
+    if stacked:
+        data = stacked_regression_data(blocks, idx_free, p_fixed, offsets=settings.torque_offsets)
+    else:
+        stats, store, names = RowStatistics(len(p_fixed)), RowStore(), {}
+        row_statistics(blocks, stats, store, names, offsets=settings.torque_offsets)
+        data = regression_data(stats, names, idx_free, p_fixed, store)
+    account.setdefault("n_samples", sum(b.t.size for b in blocks))
+    return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
+                          **account)
+
+
+def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
+                   settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
+                   blocks: Sequence[EquationBlock] = (), sources: Iterable[str] = (), notes: Iterable[str] = (),
+                   n_samples: int = 0, rows: RowCounts | None = None, slip_events: Sequence[SlipEvent] = (),
+                   slip_thresholds: Mapping[str, float] | None = None) -> Identification:
+    """Regression stage: the stacked system of eq. (22) with the fixed parameters to the right
+    (eq. 24), rank check naming what is not excited, scaled least squares (eq. 25), uncertainty,
+    physical plausibility."""
+    fixed = _check_fixed(fixed)
     with_offsets = settings.torque_offsets
-    A, y, index = stacked_rows(blocks, offsets=with_offsets)
-    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else [])
-    free = [n for n in names if n not in fixed]
-    idx_free = [names.index(n) for n in free]
-    p_fixed = np.zeros(len(names))
-    for name, value in fixed.items():
-        p_fixed[names.index(name)] = value
-    if A.shape[0] <= len(free):
+    names, free, idx_free, p_fixed = _columns(fixed, with_offsets)
+    est = estimator if estimator is not None else settings.make_estimator()
+    if data.pseudo and getattr(est, "needs_rows", False):  # robust weighs single rows: read them back
+        data = data.stacked()
+    A1, y1 = data.A, data.y
+    if data.n_rows <= len(free):
         raise UnidentifiableError(
             [Dependency(n, (), 0.0) for n in free],
-            f"{A.shape[0]} equation rows left after the stiction mask for {len(free)} parameters; ")
-    y1 = y - A @ p_fixed  # eq. (24)
-    A1 = A[:, idx_free]
+            f"{data.n_rows} equation rows left after the stiction mask for {len(free)} parameters; ")
     missing = dependent_parameters(A1, free, tolerance=settings.rank_tolerance)
     if missing:
         raise UnidentifiableError(missing)
@@ -132,9 +149,9 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     if collinear:
         raise UnidentifiableError(collinear, f"poorly conditioned data (variance inflation above "
                                              f"{settings.max_inflation:g}): ")
-    est = (estimator if estimator is not None else settings.make_estimator()).fit(A1, y1, groups=index.group,
-                                                                               names=free)
-    unc = parameter_uncertainty(settings.uncertainty, est, A1, y1, index, bandwidth=settings.bandwidth,
+    pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
+    est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
+    unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
                                 replicates=settings.bootstrap_replicates, seed=settings.seed)
     sd_all = unc.std
@@ -160,7 +177,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     std = {n: v for n, v in all_std.items() if n in PARAMETER_NAMES}
     std_classic = {n: float(v) for n, v in zip(free, est.std_) if n in PARAMETER_NAMES}
     correlation = _correlation(unc.cov, free)
-    residual_rms = _residual_rms(blocks, p, offsets)
+    residual_rms = data.residual_rms(est.coef_)
     warnings: list[str] = []
     if settings.plausibility:
         refused, warnings = implausible_parameters({n: float(v) for n, v in zip(free, est.coef_)
@@ -177,9 +194,7 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
         parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
         condition_number=cond, condition_number_unscaled=cond_unscaled,
         condition_number_with_offsets=cond_with_offsets,
-        residual_rms=residual_rms, n_rows=int(A.shape[0]),
-        n_samples=int(n_samples if n_samples is not None else sum(b.t.size for b in blocks)),
-        blocks=blocks, settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
+        residual_rms=residual_rms, n_rows=int(data.n_rows), n_samples=int(n_samples), blocks=tuple(blocks), settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
         estimator=getattr(est, "name", "") or type(est).__name__,
         std_classic=std_classic, correlation=correlation,
         uncertainty={"method": unc.method.value, **unc.details},
@@ -206,11 +221,15 @@ def _correlation(cov: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
 def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
              fixed: Mapping[str, float] = DEFAULT_FIXED,
              settings: IdentificationSettings = IdentificationSettings(),
-             estimator: Estimator | None = None, experiment: str | None = None) -> Identification:
+             estimator: Estimator | None = None, experiment: str | None = None, mapping: Any = None,
+             keep_blocks: bool = True) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
 
-    Lifted-wheel logs (every labelled row ``lifted_wheel``, or ``experiment="lifted-wheel"``) give
-    B_w and the unloaded wheel friction instead: a :class:`~agvdyn.identification.lifted.LiftedWheelIdentification`.
+    Logs are read and reduced one at a time (their kept rows to normal equations, see
+    :mod:`agvdyn.identification.normal`): with ``keep_blocks=False`` memory does not grow with the
+    number of logs. Lifted-wheel logs (every labelled row ``lifted_wheel``, or
+    ``experiment="lifted-wheel"``) give B_w and the unloaded wheel friction instead: a
+    :class:`~agvdyn.identification.lifted.LiftedWheelIdentification`.
 
     Parameters
     ----------
@@ -218,8 +237,10 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     platform : Geometry or platform file; default the sidecar's platform, else the prototype.
     fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
     settings : :class:`IdentificationSettings`.
-    estimator : an :class:`Estimator`, default :class:`LeastSquares`.
+    estimator : an :class:`Estimator`, default the one ``settings.estimator`` names.
     experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
+    mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
+    keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
 
     Raises
     ------
@@ -231,63 +252,111 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     SignConventionError
         The encoders contradict the rolling constraints unless a sign is changed (named).
     """
-    logs = load_logs(logs)
-    geometry = platform_for(logs, platform)
-    from agvdyn.identification.lifted import identify_lifted, lifted_experiment
+    items = [logs] if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha") else list(logs)
+    if not items:
+        raise ValueError("no logs given: expected at least one log")
+    geometry_in = platform if isinstance(platform, Geometry) else None
+    load = (lambda x: x if hasattr(x, "alpha") else load_logs([x], mapping=mapping, platform=platform)[0])
+    first = load(items[0])
+    geometry = geometry_in if geometry_in is not None else platform_for([first], platform)
+    from agvdyn.identification.lifted import identify_lifted, is_lifted, lifted_experiment
 
-    if lifted_experiment(logs, experiment):
-        return identify_lifted(logs, geometry, settings=settings, estimator=estimator)
-    _check_segments_present(logs, settings)
+    explicit = experiment is not None and str(experiment).strip().lower() != "auto"
+    if lifted_experiment([first], experiment) and (explicit or len(items) == 1):
+        return identify_lifted([first] + [load(x) for x in items[1:]], geometry, settings=settings,
+                               estimator=estimator)
+    if not explicit and is_lifted(first):  # more logs: every one must be lifted, else the error of mixing them
+        loaded = [first] + [load(x) for x in items[1:]]
+        lifted_experiment(loaded, experiment)
+        return identify_lifted(loaded, geometry, settings=settings, estimator=estimator)
+    stream = _LogStream(items, load, first, lifted=None if explicit else is_lifted)
     try:
-        return _identify_loaded(logs, geometry, fixed, settings, estimator)
+        return _identify_stream(stream, geometry, fixed, settings, estimator, keep_blocks)
     except (UnidentifiableError, ImplausibleError) as exc:
+        loaded = [load(x) for x in items]
         # the diagnosis compares values and residuals only: the classic covariance is enough
         lenient = dataclasses.replace(settings, plausibility=False, uncertainty="classic")
-        candidates = encoder_sign_candidates(logs, geometry, settings)  # the rolling constraints tell first
+
+        def refit(flipped: Sequence[Any], checked: IdentificationSettings = lenient) -> Identification:
+            return _identify_stream(_LogStream(flipped), geometry, fixed, checked, estimator, True)
+
+        candidates = encoder_sign_candidates(loaded, geometry, settings)  # the rolling constraints tell first
         if candidates:
-            mistake = pick_sign_candidate(
-                logs, candidates, lambda flipped: _identify_loaded(flipped, geometry, fixed, lenient, estimator))
-            raise mistake from None
+            raise pick_sign_candidate(loaded, candidates, refit) from None
         if isinstance(exc, UnidentifiableError):
             raise
-        unchecked = _identify_loaded(logs, geometry, fixed, dataclasses.replace(lenient, max_relative_std=math.inf),
-                                     estimator)
-        cause, detail = diagnose_signs(
-            logs, lambda flipped: _identify_loaded(flipped, geometry, fixed, lenient, estimator), overall_rms(unchecked))
+        unchecked = refit(loaded, dataclasses.replace(lenient, max_relative_std=math.inf))
+        cause, detail = diagnose_signs(loaded, refit, overall_rms(unchecked))
         raise ImplausibleError(exc.implausible, cause, detail) from None
 
 
-def _identify_loaded(logs: Sequence[Any], geometry: Geometry, fixed: Mapping[str, float],
-                     settings: IdentificationSettings, estimator: Estimator | None) -> Identification:
+class _LogStream:
+    """The logs of one identification, read one at a time (the first one already read)."""
+
+    def __init__(self, items: Sequence[Any], load: Any = None, first: Any = None, lifted: Any = None) -> None:
+        self.items, self.load, self.first, self.lifted = list(items), load or (lambda x: x), first, lifted
+
+    def __iter__(self):
+        for k, item in enumerate(self.items):
+            log = self.first if k == 0 and self.first is not None else self.load(item)
+            if self.lifted is not None and self.lifted(log):
+                from agvdyn.identification.lifted import lifted_experiment
+
+                lifted_experiment([self.first, log], None)  # raises: lifted and vehicle logs mixed
+            yield log
+
+
+def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str, float],
+                     settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool
+                     ) -> Identification:
+    """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one regression."""
+    fixed = _check_fixed(fixed)
+    _, _, idx_free, p_fixed = _columns(fixed, settings.torque_offsets)
+    stats, store, names = RowStatistics(len(p_fixed)), RowStore(), {}
     blocks: list[EquationBlock] = []
     notes: list[str] = []
     counts = RowCounts()
     events: list[SlipEvent] = []
     thresholds: dict[str, float] = {}
-    for log in logs:
-        rows = log_rows(log, geometry, settings)
-        blocks += rows.blocks
-        notes += rows.notes
-        counts.add(rows.counts)
-        events += rows.slip_events
-        thresholds[rows.source] = rows.slip_threshold
-    if not blocks:
-        raise ValueError(
-            "no usable rows: the logs contain no samples in a motion mode of the model "
-            f"(segments used: {', '.join(settings.segments) if settings.segments else 'all'}; rows: {counts.to_dict()})")
-    sources = [str(getattr(log, "path", None) or "<log>") for log in logs]
-    return fit_blocks(blocks, geometry, fixed=fixed, settings=settings, estimator=estimator, sources=sources,
-                      notes=notes, n_samples=sum(len(log.t) for log in logs), rows=counts, slip_events=events,
-                      slip_thresholds=thresholds)
+    sources: list[str] = []
+    labels: set[str] = set()
+    n_samples = 0
+    try:
+        for log in logs:
+            rows = log_rows(log, geometry, settings)
+            row_statistics(rows.blocks, stats, store, names, offsets=settings.torque_offsets)
+            if keep_blocks:
+                blocks += rows.blocks
+            notes += rows.notes
+            counts.add(rows.counts)
+            events += rows.slip_events
+            thresholds[rows.source] = rows.slip_threshold
+            sources.append(str(getattr(log, "path", None) or "<log>"))
+            labels |= _labels_of(log)
+            n_samples += len(log.t)
+        _check_segments_present(labels, settings)
+        if not stats.n_rows:
+            raise ValueError(
+                "no usable rows: the logs contain no samples in a motion mode of the model "
+                f"(segments used: {', '.join(settings.segments) if settings.segments else 'all'}; rows: {counts.to_dict()})")
+        data = regression_data(stats, names, idx_free, p_fixed, store)
+        return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
+                              sources=sources, notes=notes, n_samples=n_samples, rows=counts, slip_events=events,
+                              slip_thresholds=thresholds)
+    finally:
+        store.close()
 
 
-def _check_segments_present(logs: Sequence[Any], settings: IdentificationSettings) -> None:
+def _labels_of(log: Any) -> set[str]:
+    segments = getattr(log, "segments", None)
+    return set() if segments is None else {str(x) for x in np.unique(segments) if str(x)}
+
+
+def _check_segments_present(present: set[str], settings: IdentificationSettings) -> None:
     """``settings.segments`` must name labels some log carries; else an error listing the ones present."""
     if settings.segments is None:
         return
-    present = sorted({str(x) for log in logs if getattr(log, "segments", None) is not None
-                      for x in np.unique(log.segments) if str(x)})
     missing = [s for s in settings.segments if s not in present]
     if missing:
         raise ValueError(f"segments {missing} are not in the logs: the logs carry the labels "
-                         f"{present or 'none (no segment column)'}")
+                         f"{sorted(present) or 'none (no segment column)'}")

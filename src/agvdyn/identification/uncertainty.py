@@ -23,11 +23,13 @@ import math
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 import scipy.fft
 
 from agvdyn.identification.estimators import Estimator
+from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
 
 __all__ = ["UncertaintyMethod", "Uncertainty", "RowIndex", "parameter_uncertainty", "correlation_time"]
 
@@ -38,17 +40,6 @@ class UncertaintyMethod(str, Enum):
     CLASSIC = "classic"
     HAC = "hac"
     BOOTSTRAP = "bootstrap"
-
-
-@dataclass(frozen=True, eq=False)
-class RowIndex:
-    """Where each stacked row comes from: generalized coordinate ``group`` (codes into
-    ``group_names``), ``recording`` (codes) and time ``step`` (sample index in the recording)."""
-
-    group: np.ndarray
-    group_names: tuple[str, ...]
-    recording: np.ndarray
-    step: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,35 +55,44 @@ class Uncertainty:
         return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
 
 
-def _step_scores(scores: np.ndarray, rows: RowIndex) -> list[np.ndarray]:
-    """Scores summed per time step, one dense (T_rec, p) array per recording (missing steps zero)."""
-    out = []
-    for rec in np.unique(rows.recording):
-        sel = rows.recording == rec
-        step = rows.step[sel]
-        lo = int(step.min())
-        idx = step - lo
+def _recording_weights(est: Estimator, data: RegressionData) -> Iterator[tuple[RecordingRows, np.ndarray]]:
+    """Each recording's rows (free columns, eq. 24) with the estimator's weight of each row."""
+    w = np.asarray(est.weights_, dtype=float)
+    if data.row_order is not None:
+        w = w[data.row_order]
+    if data.pseudo:  # one weight per generalized coordinate
+        per_group = np.ones(len(data.group_names))
+        per_group[data.group] = w
+    start = 0
+    for rec in data.recordings():
+        m = rec.y.size
+        yield rec, (per_group[rec.group] if data.pseudo else w[start:start + m])
+        start += m
+
+
+def _step_scores(est: Estimator, data: RegressionData) -> Iterator[np.ndarray]:
+    """Scores ``a_i w_i r_i`` summed per time step, one dense (T_rec, p) array per recording (missing
+    steps zero); computed one recording at a time."""
+    coef = est.coef_
+    for rec, w in _recording_weights(est, data):
+        idx = rec.step - int(rec.step.min())
+        scores = rec.A * (w * (rec.y - rec.A @ coef))[:, None]
         dense = np.zeros((int(idx.max()) + 1, scores.shape[1]))
-        _add_rows(dense, idx, scores[sel])
-        out.append(dense)
-    return out
+        for j in range(scores.shape[1]):
+            dense[:, j] = np.bincount(idx, weights=scores[:, j], minlength=dense.shape[0])
+        yield dense
 
 
-def _add_rows(dense: np.ndarray, idx: np.ndarray, values: np.ndarray) -> None:
-    for j in range(values.shape[1]):
-        dense[:, j] += np.bincount(idx, weights=values[:, j], minlength=dense.shape[0])
-
-
-def correlation_time(series: list[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 17) -> np.ndarray:
+def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 17) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
     ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
 
     Each recording contributes at most its first ``max_steps`` steps (the correlation times are
     tens to hundreds of steps): the cost does not grow with the length of the log.
     """
-    p = series[0].shape[1]
     acf = None
     for x in series:
+        p = x.shape[1]
         x = x[:max_steps]
         n = x.shape[0]
         size = scipy.fft.next_fast_len(2 * n, real=True)
@@ -117,8 +117,7 @@ def _pad_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a
 
 
-def _bartlett_meat(series: list[np.ndarray], L: int) -> np.ndarray:
-    p = series[0].shape[1]
+def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
     omega = np.zeros((p, p))
     for g in series:
         T = g.shape[0]
@@ -129,21 +128,19 @@ def _bartlett_meat(series: list[np.ndarray], L: int) -> np.ndarray:
     return omega
 
 
-def _bootstrap(A: np.ndarray, y: np.ndarray, w: np.ndarray, rows: RowIndex, L: int, replicates: int,
-               seed: int) -> np.ndarray:
+def _bootstrap(est: Estimator, data: RegressionData, L: int, replicates: int, seed: int) -> np.ndarray:
     """Covariance of the weighted LS solution over block-bootstrap replicates."""
-    p = A.shape[1]
-    Aw = A * w[:, None]
+    p = data.A.shape[1]
     grams, rhs, rec_of = [], [], []
-    for k, rec in enumerate(np.unique(rows.recording)):
-        sel = rows.recording == rec
-        block = (rows.step[sel] - rows.step[sel].min()) // L
+    for rec, w in _recording_weights(est, data):
+        block = (rec.step - rec.step.min()) // L
         nb = int(block.max()) + 1
         G = np.zeros((nb, p, p))
         b = np.zeros((nb, p))
         order = np.argsort(block, kind="stable")
         bounds = np.searchsorted(block[order], np.arange(nb + 1))
-        As, Aws, ys = A[sel][order], Aw[sel][order], y[sel][order]
+        As, ys = rec.A[order], rec.y[order]
+        Aws = As * w[order][:, None]
         for j in range(nb):
             a, e = bounds[j], bounds[j + 1]
             G[j] = Aws[a:e].T @ As[a:e]
@@ -166,27 +163,25 @@ def _bootstrap(A: np.ndarray, y: np.ndarray, w: np.ndarray, rows: RowIndex, L: i
     return np.cov(coefs, rowvar=False)
 
 
-def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, A: np.ndarray, y: np.ndarray,
-                          rows: RowIndex, *, bandwidth: int | None = None, bandwidth_factor: float = 2.0,
+def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data: RegressionData, *,
+                          bandwidth: int | None = None, bandwidth_factor: float = 2.0,
                           min_bandwidth: int = 50, replicates: int = 200, seed: int = 0) -> Uncertainty:
-    """Covariance of ``est``'s free parameters by ``method`` (see the module docstring)."""
+    """Covariance of ``est``'s free parameters by ``method`` (see the module docstring); the rows
+    are read one recording at a time from ``data`` (twice: correlation time, then the meat)."""
     method = UncertaintyMethod(method)
     if method is UncertaintyMethod.CLASSIC:
         return Uncertainty(method, est.cov_, {"sigma2": float(est.sigma2_)})
-    w = est.weights_
-    scores = A * (w * est.residual_)[:, None]
-    series = _step_scores(scores, rows)
-    tau = correlation_time(series)
-    longest = max(s.shape[0] for s in series)
+    lengths = [int(rec.step.max() - rec.step.min()) + 1 for rec in data.store]
+    tau = correlation_time(_step_scores(est, data))
     L = int(bandwidth) if bandwidth is not None else int(min(max(min_bandwidth, math.ceil(bandwidth_factor * tau.max())),
-                                                              max(1, longest // 4)))
+                                                              max(1, max(lengths) // 4)))
     details: dict[str, Any] = {"bandwidth_steps": L, "correlation_time_steps": float(tau.max()),
-                               "recordings": len(series)}
+                               "recordings": len(lengths)}
     if method is UncertaintyMethod.HAC:
-        omega = _bartlett_meat(series, L)
+        omega = _bartlett_meat(_step_scores(est, data), L, data.A.shape[1])
         cov = est.bread_ @ omega @ est.bread_
     else:
-        cov = _bootstrap(A, y, w, rows, L, replicates, seed)
+        cov = _bootstrap(est, data, L, replicates, seed)
         details.update(replicates=replicates, block_steps=L, seed=seed)
     active = getattr(est, "active_", ())
     if active:  # parameters held by a bound: no spread from the data

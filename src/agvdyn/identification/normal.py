@@ -1,0 +1,286 @@
+"""The stacked system of eq. (22) without stacking: per log, the kept rows are reduced to the
+normal matrix (Gram block) of ``[Theta_hat | tau_hat]`` per segment and generalized coordinate, and the rows themselves go to a compact store (spilled to
+disk beyond a memory budget) that only the HAC and bootstrap covariances read back, one
+continuous recording at a time. Many logs then cost one small solve, and memory does not grow
+with the number of logs.
+
+A factor ``P^T P = G`` of each key's block, with the fixed parameters moved to the right
+(eq. 24), gives *pseudo-rows*: a few rows per key with the normal equations, column norms, QR
+factor and per-coordinate residual sums of squares of the full stacked rows. The estimators that need
+no single residual (``ols``, ``wls``, ``bounded``) solve on them the same problem as on the rows.
+"""
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import tempfile
+import weakref
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agvdyn.dynamics import N_P
+from agvdyn.identification.equations import EquationBlock
+
+__all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "row_statistics", "regression_data",
+           "stacked_regression_data"]
+
+
+@dataclass(frozen=True, eq=False)
+class RowIndex:
+    """Where each stacked row comes from: generalized coordinate ``group`` (codes into
+    ``group_names``), ``recording`` (codes) and time ``step`` (sample index in the recording)."""
+
+    group: np.ndarray
+    group_names: tuple[str, ...]
+    recording: np.ndarray
+    step: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class RecordingRows:
+    """Kept rows of one continuous recording: ``A`` (m, w) full regressor (parameters and offset
+    columns), ``y`` (m,), ``group`` (m,) coordinate codes, ``step`` (m,) sample index, ``key``
+    (m,) codes of their (segment, coordinate) in the order of :class:`RowStatistics`."""
+
+    A: np.ndarray
+    y: np.ndarray
+    group: np.ndarray
+    step: np.ndarray
+    key: np.ndarray | None = None
+
+
+class RowStore:
+    """Rows per continuous recording; past ``budget`` bytes in memory they go to a temporary folder
+    (removed with the store). Iterating yields :class:`RecordingRows` in the order added."""
+
+    def __init__(self, budget: int = 64 << 20) -> None:
+        self.budget = budget
+        self._items: list[RecordingRows | Path] = []
+        self._bytes = 0
+        self._folder: Path | None = None
+        self._cleanup: weakref.finalize | None = None
+
+    def add(self, rows: RecordingRows) -> None:
+        size = sum(x.nbytes for x in (rows.A, rows.y, rows.group, rows.step, rows.key) if x is not None)
+        if self._bytes + size <= self.budget:
+            self._items.append(rows)
+            self._bytes += size
+            return
+        if self._folder is None:
+            self._folder = Path(tempfile.mkdtemp(prefix="agvdyn-rows-"))
+            self._cleanup = weakref.finalize(self, shutil.rmtree, self._folder, True)
+        path = self._folder / f"{len(self._items)}.npz"
+        np.savez(path, A=rows.A, y=rows.y, group=rows.group, step=rows.step,
+                 **({} if rows.key is None else {"key": rows.key}))
+        self._items.append(path)
+
+    def __iter__(self) -> Iterator[RecordingRows]:
+        for item in self._items:
+            if isinstance(item, Path):
+                with np.load(item) as f:
+                    yield RecordingRows(f["A"], f["y"], f["group"], f["step"], f["key"] if "key" in f else None)
+            else:
+                yield item
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    @property
+    def spilled(self) -> int:
+        return sum(isinstance(i, Path) for i in self._items)
+
+    def close(self) -> None:
+        if self._cleanup is not None:
+            self._cleanup()
+        self._items.clear()
+
+
+@dataclass
+class RowStatistics:
+    """Normal matrices ``[A | y]^T [A | y]`` per (segment, coordinate), in the order first seen, and
+    their row counts. ``width``: columns of A (11 parameters, plus 4 offsets)."""
+
+    width: int
+    grams: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    counts: dict[tuple[str, str], int] = field(default_factory=dict)
+
+    def add(self, key: tuple[str, str], rows: np.ndarray) -> None:
+        """Add rows ``[A | y]`` (m, width + 1) to the normal matrix of ``key``."""
+        if rows.shape[0] == 0:
+            return
+        gram = rows.T @ rows
+        old = self.grams.get(key)
+        self.grams[key] = gram if old is None else old + gram
+        self.counts[key] = self.counts.get(key, 0) + rows.shape[0]
+
+    @property
+    def n_rows(self) -> int:
+        return sum(self.counts.values())
+
+    def key_code(self, key: tuple[str, str]) -> int:
+        """Position of ``key`` among the keys (a new key gets the next one)."""
+        if key not in self.grams:
+            self.grams[key] = np.zeros((self.width + 1, self.width + 1))
+            self.counts[key] = 0
+        return list(self.grams).index(key)
+
+    def factor(self, key: tuple[str, str]) -> np.ndarray:
+        """``P`` (width + 1, width + 1) with ``P^T P`` the normal matrix of ``key``: pseudo-rows, from
+        the eigen-decomposition of the column-scaled normal matrix (positive semi-definite)."""
+        G = self.grams[key]
+        nz = np.flatnonzero(np.diag(G) > 0)  # columns that are exactly zero stay exactly zero
+        d = np.sqrt(np.diag(G)[nz])
+        lam, V = np.linalg.eigh(G[np.ix_(nz, nz)] / np.outer(d, d))
+        P = np.zeros_like(G)
+        P[: nz.size, nz] = (np.sqrt(np.clip(lam, 0.0, None))[:, None] * V.T) * d
+        return P
+
+
+def _block_rows(b: EquationBlock, offsets: bool) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Per coordinate j of a block: (j, kept [A | y] rows, their sample indices)."""
+    for j in range(len(b.coordinates)):
+        keep = b.keep[:, j]
+        if not keep.any():
+            continue
+        parts = [b.regressor[keep, j, :]]
+        if offsets:
+            parts.append(b.offset_regressor[keep, j, :])
+        parts.append(b.torque[keep, j][:, None])
+        yield j, np.concatenate(parts, axis=1), b.sample[keep]
+
+
+def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store: RowStore | None,
+                   group_names: dict[str, int], *, offsets: bool) -> None:
+    """Add the kept rows of ``blocks`` (one log) to ``stats`` and, per recording, to ``store``."""
+    per_key: dict[tuple[str, str], list[np.ndarray]] = {}
+    recording: dict[str, list[tuple[np.ndarray, ...]]] = {}
+    for b in blocks:
+        for j, rows, step in _block_rows(b, offsets):
+            coord = b.coordinates[j]
+            key = (b.segment, coord)
+            per_key.setdefault(key, []).append(rows)
+            code = group_names.setdefault(coord, len(group_names))
+            key_code = stats.key_code(key)
+            recording.setdefault(b.recording, []).append(
+                (rows, np.full(rows.shape[0], code, np.int8), step, np.full(rows.shape[0], key_code, np.int16)))
+    for key, parts in per_key.items():
+        stats.add(key, np.concatenate(parts) if len(parts) > 1 else parts[0])
+    if store is None:
+        return
+    for parts in recording.values():
+        rows = np.concatenate([p[0] for p in parts])
+        store.add(RecordingRows(rows[:, :-1], rows[:, -1].copy(), *(np.concatenate([p[k] for p in parts])
+                                                                     for k in (1, 2, 3))))
+
+
+@dataclass(frozen=True, eq=False)
+class RegressionData:
+    """What the regression of eq. (24) works on: ``A`` (rows, free) and ``y`` (rows,) with the
+    fixed parameters moved to the right, either the stacked rows themselves or pseudo-rows with
+    the same normal equations (``pseudo``). ``group`` codes into ``group_names`` per row,
+    ``group_rows``: number of stacked rows per group; ``n_rows``: of the stacked system.
+    ``keys``: the (segment, coordinate) pairs, ``key_rows`` their stacked rows, ``key_pseudo``
+    their pseudo-rows ``[A | y]`` (for the residual RMS per key). ``store``: the stacked rows per recording (full width), for the covariances that need them.
+    """
+
+    A: np.ndarray
+    y: np.ndarray
+    group: np.ndarray
+    group_names: tuple[str, ...]
+    group_rows: np.ndarray
+    n_rows: int
+    pseudo: bool
+    free: tuple[int, ...]
+    theta_fixed: np.ndarray
+    keys: tuple[tuple[str, str], ...] = ()
+    key_rows: tuple[int, ...] = ()
+    key_pseudo: tuple[np.ndarray, ...] = ()
+    store: RowStore | None = None
+    row_order: np.ndarray | None = None  # rows of A in the store's order, when they differ
+
+    def residual_rms(self, coef: np.ndarray) -> dict[str, float]:
+        """RMS of tau - Theta p per "segment:coordinate" (pooled over logs): from the stored rows
+        (exact), else from the pseudo-rows (to about 1e-8 of the torques)."""
+        if self.store is not None and all(rec.key is not None for rec in self.store):
+            sums = np.zeros(len(self.keys))
+            for rec in self.recordings():
+                r = rec.y - rec.A @ coef
+                sums += np.bincount(rec.key, weights=r * r, minlength=len(self.keys))
+        else:
+            x = np.append(coef, -1.0)
+            sums = np.array([float((P @ x) @ (P @ x)) for P in self.key_pseudo])
+        return {f"{k[0]}:{k[1]}": float(np.sqrt(s / n)) for k, n, s in zip(self.keys, self.key_rows, sums) if n}
+
+    @classmethod
+    def from_rows(cls, A: np.ndarray, y: np.ndarray, index: RowIndex) -> "RegressionData":
+        """Stacked rows ``A`` (m, p), ``y`` with their :class:`RowIndex`; every column free."""
+        A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
+        store = RowStore(budget=1 << 62)
+        order = np.argsort(index.recording, kind="stable")
+        bounds = np.flatnonzero(np.diff(index.recording[order])) + 1
+        for sel in np.split(order, bounds) if order.size else []:
+            store.add(RecordingRows(A[sel], y[sel], index.group[sel], index.step[sel]))
+        p = A.shape[1]
+        return cls(A, y, index.group, index.group_names, np.bincount(index.group, minlength=len(index.group_names)),
+                   A.shape[0], False, tuple(range(p)), np.zeros(p), store=store, row_order=order)
+
+    def theta(self, coef: np.ndarray) -> np.ndarray:
+        """All columns' values (fixed ones as given) from the free ones."""
+        theta = self.theta_fixed.copy()
+        theta[list(self.free)] = coef
+        return theta
+
+    def stacked(self) -> "RegressionData":
+        """The same system with every stored row in memory (for estimators that weigh single rows)."""
+        if self.store is None:
+            raise RuntimeError("these regression data keep no rows")
+        recs = list(self.recordings())
+        A = np.vstack([r.A for r in recs]) if recs else np.zeros((0, len(self.free)))
+        y = np.concatenate([r.y for r in recs]) if recs else np.zeros(0)
+        group = np.concatenate([r.group for r in recs]).astype(np.int64) if recs else np.zeros(0, np.int64)
+        return dataclasses.replace(self, A=A, y=y, group=group, pseudo=False, row_order=None,
+                                   group_rows=np.bincount(group, minlength=len(self.group_names)))
+
+    def recordings(self) -> Iterator[RecordingRows]:
+        """Rows of each recording with the free columns only and ``y`` as in eq. (24)."""
+        if self.store is None:
+            raise RuntimeError("these regression data keep no rows")
+        free = list(self.free)
+        for rec in self.store:
+            yield RecordingRows(rec.A[:, free], rec.y - rec.A @ self.theta_fixed, rec.group, rec.step, rec.key)
+
+
+def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Sequence[int], theta_fixed: np.ndarray,
+                    store: RowStore | None) -> RegressionData:
+    """Pseudo-rows ``R_key T`` of every key, ``T`` taking ``[A | y]`` to ``[A_free | y - A theta_fixed]``."""
+    width = stats.width
+    T = np.zeros((width + 1, len(free) + 1))
+    T[list(free), np.arange(len(free))] = 1.0
+    T[:width, -1] = -theta_fixed
+    T[width, -1] = 1.0
+    blocks, codes, rows = [], [], []
+    group_rows = np.zeros(len(group_names), dtype=np.int64)
+    for key in stats.grams:
+        P = stats.factor(key) @ T
+        blocks.append(P)
+        code = group_names[key[1]]
+        codes.append(np.full(P.shape[0], code, np.int64))
+        rows.append(stats.counts[key])
+        group_rows[code] += stats.counts[key]
+    P = np.vstack(blocks) if blocks else np.zeros((0, len(free) + 1))
+    return RegressionData(P[:, :-1], P[:, -1], np.concatenate(codes) if codes else np.zeros(0, np.int64),
+                          tuple(group_names), group_rows, stats.n_rows, True, tuple(free), theta_fixed,
+                          tuple(stats.grams), tuple(rows), tuple(blocks), store)
+
+
+def stacked_regression_data(blocks: Sequence[EquationBlock], free: Sequence[int], theta_fixed: np.ndarray, *,
+                            offsets: bool) -> RegressionData:
+    """The reference: all kept rows stacked (eq. 22), in memory, as :func:`regression_data` sees them."""
+    stats = RowStatistics(N_P + (4 if offsets else 0))
+    store = RowStore(budget=1 << 62)
+    names: dict[str, int] = {}
+    row_statistics(blocks, stats, store, names, offsets=offsets)
+    return regression_data(stats, names, free, theta_fixed, store).stacked()
