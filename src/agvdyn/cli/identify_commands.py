@@ -102,12 +102,12 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
         raise fail(str(exc)) from exc
 
 
-def _identified(logs, geometry, fixed, settings, experiment: Optional[str] = None):
+def _identified(logs, geometry, fixed, settings, experiment: Optional[str] = None, **options):
     """identify(), with refusals for data quality as exit code 1 and bad input as exit code 2."""
     from agvdyn.identification import ImplausibleError, UnidentifiableError, identify as identify_parameters
 
     try:
-        return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=experiment)
+        return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=experiment, **options)
     except (UnidentifiableError, ImplausibleError) as exc:
         raise fail(f"refused: {exc}", code=1) from exc
     except ValueError as exc:
@@ -182,8 +182,8 @@ def identify(
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
                          max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
-    loaded, geometry = _load(logs, mapping, platform)
-    ident = _identified(loaded, geometry, fixed, settings, experiment)
+    # logs are read one at a time inside identify(): memory does not grow with their number
+    ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False)
     try:
         written = ident.write(out)
     except OSError as exc:
@@ -300,6 +300,10 @@ def report(
                                              "prototype, else no comparison."),
     params_out: Optional[Path] = typer.Option(None, "--params-out", help="Also write the parameter file here "
                                               "(.yaml, or .json)."),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="Plan file (agvdyn plan --out) the logs were driven "
+                                        "from: the report shows its floor, the planned and driven paths, cond and "
+                                        "predicted std; default: the plan a simulated log's sidecar names, found "
+                                        "next to the log or in the working directory."),
     platform: PlatformOpt = None,
     fix: FixOpt = None,
     mapping: MappingOpt = None,
@@ -319,12 +323,12 @@ def report(
     bandwidth: BandwidthOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """Identify, validate and write one self-contained HTML report: verdict, data quality, parameters,
-    correlation, residuals, Fig. 5, Fig. 6 and provenance.
+    """Identify, validate and write one self-contained HTML report: verdict, data quality, excitation plan
+    (when there is one), parameters, correlation, residuals, Fig. 5, Fig. 6 and provenance.
 
     Exit codes: 0 identified (with or without warnings), 1 refused (the report says why), 2 bad input.
     """
-    from agvdyn.report import Outcome, command_line, make_report, reference_from_file, write_report
+    from agvdyn.report import Outcome, command_line, make_report, read_plan, reference_from_file, write_report
 
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
@@ -335,11 +339,15 @@ def report(
         raise fail(f"--reference {reference}: {exc}") from exc
     loaded, geometry = _load(ident_logs, mapping, platform)
     val_log = None if validation is None else _load([validation], mapping, platform)[0][0]
+    try:
+        plan_file = None if plan is None else read_plan(plan, geometry)
+    except ValueError as exc:
+        raise fail(f"--plan: {exc}") from exc
     extra = {role: path for role, path in (("mapping", mapping), ("platform", platform), ("reference", reference))
              if path is not None}
     try:
         rep = make_report(loaded, geometry, fixed=fixed, settings=settings, validation_log=val_log, reference=ref,
-                          extra_files=extra, command=command_line())
+                          extra_files=extra, command=command_line(), plan=plan_file)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     try:

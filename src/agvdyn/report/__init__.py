@@ -6,6 +6,8 @@ Fig. 5, Fig. 6 and the provenance of every number.
                 provenance) -> :class:`Report`; :func:`report_of` for results computed elsewhere
     reference   what to compare with: ``--reference`` file, simulator truth, Table 2 for the
                 paper's prototype only; :func:`parameter_table`
+    plan        the excitation plan the logs were driven from (``--plan`` or found by a sidecar):
+                :func:`read_plan`, :func:`excitation_plan`, the section's figure and HTML
     document    :func:`report_html`, :func:`write_report` (one self-contained HTML file)
 
 Example::
@@ -32,6 +34,7 @@ from agvdyn.report.assemble import (
     verdict_of,
 )
 from agvdyn.report.document import figure_png, report_html, write_report
+from agvdyn.report.plan import ExcitationPlan, PlanFile, excitation_plan, read_plan
 from agvdyn.report.reference import (
     TABLE2,
     Reference,
@@ -44,5 +47,6 @@ from agvdyn.report.reference import (
 __all__ = [
     "MAX_VALIDATION_NRMSE", "InputFile", "Outcome", "Provenance", "Report", "Verdict", "command_line", "input_file",
     "make_report", "report_of", "verdict_of", "figure_png", "report_html", "write_report", "TABLE2", "Reference",
-    "choose_reference", "parameter_table", "reference_from_file", "sidecar_truth",
+    "choose_reference", "parameter_table", "reference_from_file", "sidecar_truth", "ExcitationPlan", "PlanFile",
+    "excitation_plan", "read_plan",
 ]

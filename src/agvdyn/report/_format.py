@@ -2,16 +2,21 @@
 separators, powers of ten instead of ``e-05``, units that never wrap, ``yes``/``no``."""
 from __future__ import annotations
 
+import base64
 import html
+import io
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-__all__ = ["esc", "num", "count", "percent", "unit", "yes_no", "nbytes", "plain", "value_std_ci", "table"]
+__all__ = ["esc", "num", "count", "percent", "unit", "yes_no", "nbytes", "plain", "value_std_ci", "table",
+           "figure_png", "img"]
 
 #: Below this magnitude (or from ``10**LARGE`` on) numbers are written as a power of ten.
 SMALL = 1e-3
 LARGE = 5
+#: Resolution of the embedded figures (a 12 in wide figure is 1,200 px, the page's width).
+DPI = 100
 _SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
 
 
@@ -133,3 +138,16 @@ def table(header: Sequence[str] | None, rows: Iterable[Sequence[str]], *, align:
         cells = "".join(f"<td{cls(i)}>{c}</td>" for i, c in enumerate(row))
         body.append(f"<tr{rc}>{cells}</tr>")
     return f"<table>{head}<tbody>{''.join(body)}</tbody></table>"
+
+
+def figure_png(fig, dpi: int = DPI) -> str:
+    """A figure as base64-encoded PNG."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, facecolor="white")
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def img(fig, alt: str, cls: str = "") -> str:
+    """A figure embedded as ``<figure>`` with its caption ``alt``."""
+    return (f'<figure class="{cls}"><img alt="{esc(alt)}" src="data:image/png;base64,{figure_png(fig)}">'
+            f"<figcaption>{esc(alt)}</figcaption></figure>")

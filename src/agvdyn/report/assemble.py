@@ -32,6 +32,7 @@ from agvdyn.identification.stretches import stretch_bounds
 from agvdyn.io.log import sidecar_path
 from agvdyn.platform import PARAMETER_UNITS, Geometry
 from agvdyn.preflight import Preflight, preflight
+from agvdyn.report.plan import ExcitationPlan, PlanFile, excitation_plan
 from agvdyn.report.reference import Reference, choose_reference, parameter_table
 
 __all__ = ["Outcome", "Verdict", "InputFile", "Provenance", "Report", "make_report", "report_of", "verdict_of",
@@ -133,6 +134,8 @@ class Report:
     reference: Reference | None = None
     cuts: tuple[tuple[tuple[float, float], ...], ...] = ()
     title: str = "agvdyn identification report"
+    plan: ExcitationPlan | None = None
+    plan_notes: tuple[str, ...] = ()
 
     @property
     def parameter_table(self):
@@ -147,6 +150,7 @@ class Report:
         out["validation"] = None if self.validation is None else self.validation.to_json_dict()
         out["refusal"] = None if self.refusal is None else str(self.refusal)
         out["provenance"] = self.provenance.to_dict()
+        out["plan"] = None if self.plan is None else self.plan.to_dict()
         return out
 
 
@@ -288,7 +292,8 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
                 settings: IdentificationSettings = IdentificationSettings(), validation_log: Any = None,
                 reference: Reference | None = None, extra_files: Mapping[str, str | os.PathLike] | None = None,
                 command: str | None = None, max_nrmse: float = MAX_VALIDATION_NRMSE,
-                title: str = "agvdyn identification report") -> Report:
+                title: str = "agvdyn identification report", plan: PlanFile | str | os.PathLike | None = None
+                ) -> Report:
     """Pre-flight, identify, validate and judge: the contents of the report.
 
     Parameters
@@ -301,6 +306,8 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
         for the paper's prototype, else no comparison (:func:`choose_reference`).
     extra_files : other inputs for the provenance, ``{role: path}`` (mapping, platform, reference file).
     command : the command line, for the provenance.
+    plan : the plan file the logs were driven from (:func:`agvdyn.report.plan.read_plan`); None:
+        the one a simulated log's sidecar leads to, if any (:func:`agvdyn.report.plan.plan_of_logs`).
 
     A refusal (:class:`UnidentifiableError`, :class:`ImplausibleError`) gives a report with the
     verdict ``refused``; other errors (bad input) propagate.
@@ -317,9 +324,25 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
         val = validate(validation_log, ident.parameters, geometry, settings=settings)
     ref = choose_reference(logs, geometry, reference)
     verdict = verdict_of(ident, refusal, val, ref, checked, max_nrmse=max_nrmse)
+    excitation, plan_notes = _plan(logs, geometry, plan, ident, ref)
+    extra = dict(extra_files or {})
+    if excitation is not None:
+        extra.setdefault("plan", excitation.file.path)
     prov = _provenance(logs, [] if validation_log is None else [validation_log], geometry,
-                       _settings_dict(fixed, settings), extra_files or {}, command)
-    return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(logs, settings), title)
+                       _settings_dict(fixed, settings), extra, command)
+    return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(logs, settings), title,
+                  excitation, plan_notes)
+
+
+def _plan(logs: Sequence[Any], geometry: Geometry, plan: PlanFile | str | os.PathLike | None,
+          ident: Identification | None, ref: Reference | None) -> tuple[ExcitationPlan | None, tuple[str, ...]]:
+    """The excitation plan, its predicted std relative to the identified values (else the reference)."""
+    if ident is not None:
+        return excitation_plan(logs, geometry, plan, parameters=ident.parameters,
+                               parameters_label="the identified values")
+    if ref is not None:
+        return excitation_plan(logs, geometry, plan, parameters=ref.parameters, parameters_label=ref.label)
+    return excitation_plan(logs, geometry, plan)
 
 
 def report_of(identification: Identification, validation: Any = None, *, reference: Reference | None = None,

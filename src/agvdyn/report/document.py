@@ -3,8 +3,6 @@ residuals, Fig. 5, Fig. 6 and provenance. Figures are embedded as base64 PNG; no
 external file. Written atomically (``agvdyn._files.write_text_atomically``)."""
 from __future__ import annotations
 
-import base64
-import io
 import os
 from pathlib import Path
 from typing import Any
@@ -14,27 +12,16 @@ import numpy as np
 from agvdyn import plots
 from agvdyn._files import write_text_atomically
 from agvdyn.platform import PAPER_CONDITION_NUMBER, PARAMETER_NAMES, PARAMETER_UNITS
-from agvdyn.report._format import count, esc, nbytes, num, percent, plain, table, unit, value_std_ci, yes_no
+from agvdyn.report._format import count, esc, figure_png, nbytes, num, percent, plain, table, unit, value_std_ci
+from agvdyn.report._format import img as _img
+from agvdyn.report._format import yes_no
 from agvdyn.report.assemble import Outcome, Report, report_of
+from agvdyn.report.plan import plan_html
 from agvdyn.report.reference import Reference
 
 __all__ = ["figure_png", "report_html", "write_report"]
 
-#: Resolution of the embedded figures (a 12 in wide figure is 1,200 px, the page's width).
-DPI = 100
 _UNITS = {"alpha_l": "N m", "alpha_r": "N m", "alpha_v": "N m", "gamma_ch": "N m", "x_ch": "N", "y_ch": "N"}
-
-
-def figure_png(fig, dpi: int = DPI) -> str:
-    """A figure as base64-encoded PNG."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, facecolor="white")
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _img(fig, alt: str, cls: str = "") -> str:
-    return (f'<figure class="{cls}"><img alt="{esc(alt)}" src="data:image/png;base64,{figure_png(fig)}">'
-            f"<figcaption>{esc(alt)}</figcaption></figure>")
 
 
 _CSS = """
@@ -73,7 +60,8 @@ pre { white-space: pre-wrap; background: #f6f7f8; padding: 10px; border-radius: 
 .grid table { width: 100%; }
 """
 
-_SECTIONS = (("verdict", "Verdict"), ("data-quality", "Data quality"), ("parameters", "Parameters"),
+_SECTIONS = (("verdict", "Verdict"), ("data-quality", "Data quality"), ("plan", "Excitation plan"),
+             ("parameters", "Parameters"),
              ("correlation", "Correlation"), ("residuals", "Residuals"), ("fit", "Fit (Fig. 5)"),
              ("validation", "Validation (Fig. 6)"), ("provenance", "Provenance"))
 
@@ -328,8 +316,9 @@ def _provenance(report: Report) -> str:
 def report_html(report: Report) -> str:
     """The report as an HTML string (figures embedded, no script)."""
     title = esc(report.title)
-    sections = [_quality(report), _parameters(report), _correlation(report), _residuals(report), _fit(report),
-                _validation(report), _provenance(report)]
+    sections = [_quality(report), plan_html(report.plan, report.plan_notes, report.identification),
+                _parameters(report), _correlation(report), _residuals(report), _fit(report), _validation(report),
+                _provenance(report)]
     html_all = "".join(sections)
     nav = "".join(f'<a href="#{k}">{v}</a>' for k, v in _SECTIONS if k == "verdict" or f'id="{k}"' in html_all)
     head = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
