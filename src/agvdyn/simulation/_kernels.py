@@ -12,8 +12,6 @@ import math
 import numpy as np
 from numba import njit
 
-from agvdyn.kinematics import constraint_matrix_into
-
 # Indices of the constant vector handed to the compiled code.
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
  _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
@@ -21,30 +19,40 @@ _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 
 
 # --- plant (see plant.py) ---
+#
+# The hot path: one step costs three sine/cosine pairs (the steering angles and the heading) and
+# walks only the nonzero entries of A(alpha) and M(alpha), in the order of the dense sums, so the
+# results equal those of the dense products bit for bit.
 
 @njit(cache=True)
-def _unit_geometry(c, alpha, i):
-    """Heading, side sign, heading sign, steering axis and unit position terms of wheel i."""
+def _unit_frame(c, i):
+    """Side index, side sign, heading sign and steering axis position of wheel i."""
     side = 0 if i < 2 else 1
     s = 1.0 if i < 2 else -1.0
     h = 1.0 if i % 2 == 0 else -1.0
-    cx = c[_L] / 2 * h
-    cy = c[_B] / 2 * s
-    th = h * alpha[side]
-    return side, s, h, cx, cy, th
+    return side, s, h, c[_L] / 2 * h, c[_B] / 2 * s
 
 
 @njit(cache=True)
-def _mass_matrix(c, alpha, M):
-    """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities)."""
+def _unit_trig(alpha, tr):
+    """cos and sin (4, 2) of each wheel's heading h_i alpha_side (cos and sin are even and odd)."""
+    for j in range(2):
+        ca, sa = math.cos(alpha[j]), math.sin(alpha[j])
+        tr[2 * j, 0], tr[2 * j, 1] = ca, sa
+        tr[2 * j + 1, 0], tr[2 * j + 1, 1] = ca, -sa
+
+
+@njit(cache=True)
+def _mass_matrix_trig(c, tr, M):
+    """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities) from the unit headings."""
     M[:, :] = 0.0
     M[0, 0] = c[_MB]
     M[1, 1] = c[_MB]
     M[2, 2] = c[_CB]
     m_u, e = c[_MU_MASS], c[_EU]
     for i in range(4):
-        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
-        ct, st = math.cos(th), math.sin(th)
+        side, s, h, cx, cy = _unit_frame(c, i)
+        ct, st = tr[i, 0], tr[i, 1]
         px = cx - s * e * st
         py = cy + s * e * ct
         dpx = -s * e * h * ct  # d p / d alpha_side
@@ -66,8 +74,16 @@ def _mass_matrix(c, alpha, M):
 
 
 @njit(cache=True)
-def _bias(c, alpha, v, out):
-    """Coriolis and centrifugal forces h(alpha, v) (9,) of the plant in body-frame velocities."""
+def _mass_matrix(c, alpha, M):
+    """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities)."""
+    tr = np.empty((4, 2))
+    _unit_trig(alpha, tr)
+    _mass_matrix_trig(c, tr, M)
+
+
+@njit(cache=True)
+def _bias_trig(c, tr, v, out):
+    """Coriolis and centrifugal forces h(alpha, v) (9,) from the unit headings."""
     out[:] = 0.0
     w = v[2]
     out[0] = -c[_MB] * w * v[1]
@@ -76,8 +92,8 @@ def _bias(c, alpha, v, out):
     if m_u == 0.0:
         return
     for i in range(4):
-        side, s, h, cx, cy, th = _unit_geometry(c, alpha, i)
-        ct, st = math.cos(th), math.sin(th)
+        side, s, h, cx, cy = _unit_frame(c, i)
+        ct, st = tr[i, 0], tr[i, 1]
         px = cx - s * e * st
         py = cy + s * e * ct
         dpx = -s * e * h * ct
@@ -97,6 +113,65 @@ def _bias(c, alpha, v, out):
 
 
 @njit(cache=True)
+def _bias(c, alpha, v, out):
+    """Coriolis and centrifugal forces h(alpha, v) (9,) of the plant in body-frame velocities."""
+    tr = np.empty((4, 2))
+    _unit_trig(alpha, tr)
+    _bias_trig(c, tr, v, out)
+
+
+@njit(cache=True)
+def _constraint_rows(c, tr, A):
+    """The nonzero entries of A(alpha) (8, 9) of eq. (1)-(2) with the true rolling radii, as
+    ``kinematics.constraint_matrix_into`` computes them; the structural zeros of A are left alone.
+    Row i: lateral slip (columns 0-2); row 4 + i: longitudinal (0-2, 3 + side, 5 + i)."""
+    for i in range(4):
+        side, s_i, h, cx, cy = _unit_frame(c, i)
+        co, s = tr[i, 0], tr[i, 1]
+        A[i, 0], A[i, 1], A[i, 2] = -s, co, s * cy + co * cx
+        A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = co, s, -co * cy + s * cx - s_i * c[_A]
+        A[4 + i, 3 + side] = -s_i * c[_A] * h
+        A[4 + i, 5 + i] = -c[_RW + i]
+
+
+@njit(cache=True)
+def _slip_velocities(A, v, out):
+    """out = A v (8,) over the nonzero entries of A (summed in the order of the dense product)."""
+    for i in range(4):
+        a = 3 if i < 2 else 4
+        out[i] = 0.0 + A[i, 0] * v[0] + A[i, 1] * v[1] + A[i, 2] * v[2]
+        out[4 + i] = (0.0 + A[4 + i, 0] * v[0] + A[4 + i, 1] * v[1] + A[4 + i, 2] * v[2]
+                      + A[4 + i, a] * v[a] + A[4 + i, 5 + i] * v[5 + i])
+
+
+@njit(cache=True)
+def _iteration_matrix(M, A, d, dt, K):
+    """Lower triangle of K = M + dt A^T diag(d) A (9, 9) over the nonzero entries of A: the chassis
+    columns 0-2 meet every row of A, steering side j the longitudinal rows 4 + 2j, 5 + 2j, wheel i row 4 + i."""
+    for p in range(3):
+        for q in range(p + 1):
+            t = 0.0
+            for j in range(8):
+                t += A[j, p] * d[j] * A[j, q]
+            K[p, q] = M[p, q] + dt * t
+    for p in range(3, 5):
+        j0 = 4 if p == 3 else 6
+        for q in range(3):
+            K[p, q] = M[p, q] + dt * (0.0 + A[j0, p] * d[j0] * A[j0, q] + A[j0 + 1, p] * d[j0 + 1] * A[j0 + 1, q])
+        K[p, p] = M[p, p] + dt * (0.0 + A[j0, p] * d[j0] * A[j0, p] + A[j0 + 1, p] * d[j0 + 1] * A[j0 + 1, p])
+    K[4, 3] = M[4, 3]
+    for i in range(4):
+        p, j, a = 5 + i, 4 + i, 3 if i < 2 else 4
+        for q in range(3):
+            K[p, q] = M[p, q] + dt * (0.0 + A[j, p] * d[j] * A[j, q])
+        K[p, a] = M[p, a] + dt * (0.0 + A[j, p] * d[j] * A[j, a])
+        K[p, 7 - a] = M[p, 7 - a]
+        for q in range(5, p):
+            K[p, q] = M[p, q]
+        K[p, p] = M[p, p] + dt * (0.0 + A[j, p] * d[j] * A[j, p])
+
+
+@njit(cache=True)
 def _coulomb(c, v, d_c):
     """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0)."""
     mode = c[_COUL]
@@ -110,6 +185,8 @@ def _coulomb(c, v, d_c):
         sec = d_c / eps if abs(x) < 1e-8 else f / v
         return f, sec, d_c / eps / math.cosh(min(abs(x), 300.0)) ** 2
     vs = c[_VSTICK]
+    if c[_RATIO] == 1.0:  # no breakaway peak: the level is d_c (skips the exponential)
+        return (d_c * v / vs, d_c / vs, d_c / vs) if av <= vs else (d_c * (1.0 if v > 0 else -1.0), d_c / av, 0.0)
     e = math.exp(-(av / c[_VSTRIB]) ** 2)
     level = d_c * (1.0 + (c[_RATIO] - 1.0) * e)
     if av <= vs:
@@ -133,9 +210,10 @@ def _friction_terms(c, v, d_v, d_c, inertia, dt):
     return d_v + slope, f - slope * v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cholesky_solve(K, rhs, n):
-    """Solve K x = rhs in place (K symmetric positive definite, overwritten); returns x in rhs."""
+    """Solve K x = rhs in place (K symmetric positive definite, lower triangle read and
+    overwritten); returns x in rhs."""
     for j in range(n):
         d = K[j, j]
         for k in range(j):
@@ -160,23 +238,37 @@ def _cholesky_solve(K, rhs, n):
 
 
 @njit(cache=True)
-def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec, mu_w):
-    """Advance the plant by one linearly-implicit Euler step of length dt (in place).
+def workspace():
+    """Scratch arrays of :func:`plant_step`: M, K (9, 9), A (8, 9) (zeros kept), h, rhs (9,),
+    slip, dvec (8,), joint friction (2, 9), unit headings (4, 2)."""
+    return (np.zeros((9, 9)), np.zeros((9, 9)), np.zeros((8, 9)), np.zeros(9), np.zeros(9), np.zeros(8),
+            np.zeros(8), np.zeros((2, 9)), np.zeros((4, 2)))
+
+
+@njit(cache=True, error_model="numpy")
+def plant_step(c, pos, vel, torque, dt, work, mu_w, ws):
+    """Advance the plant by one linearly-implicit Euler step of length dt (in place); returns the
+    kinetic energy 0.5 v^T M(alpha) v before the step.
 
     ``torque``: motor torques (4,) after the drive's limit; ``work`` (3,) accumulates
     (motor work, dissipated work, stop work) over the step, evaluated at the new velocities;
-    ``mu_w`` (4,): factor on the friction coefficient of each wheel (1: the floor's mu).
+    ``mu_w`` (4,): factor on the friction coefficient of each wheel (1: the floor's mu);
+    ``ws``: scratch arrays from :func:`workspace`.
     """
+    M, K, A, h, rhs, slip, dvec, jf, tr = ws
     alpha = pos[3:5]
-    _mass_matrix(c, alpha, M)
-    _bias(c, alpha, vel, h)
-    constraint_matrix_into(c[_L], c[_B], c[_A], c[_RW:_RW + 4], alpha[0], alpha[1], A)
+    _unit_trig(alpha, tr)
+    _mass_matrix_trig(c, tr, M)
+    _bias_trig(c, tr, vel, h)
+    _constraint_rows(c, tr, A)
+    energy = 0.0
+    for p in range(5):
+        for q in range(5):
+            energy += vel[p] * M[p, q] * vel[q]
+    for p in range(5, 9):
+        energy += vel[p] * M[p, p] * vel[p]
     # slip velocities and tyre secant coefficients (lagged)
-    for j in range(8):
-        t = 0.0
-        for q in range(9):
-            t += A[j, q] * vel[q]
-        slip[j] = t
+    _slip_velocities(A, vel, slip)
     for i in range(4):
         mufz = c[_MU] * mu_w[i] * c[_FZ]
         v_contact = slip[4 + i] + c[_RW + i] * vel[5 + i]
@@ -186,39 +278,31 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
         g = 1.0 if sig < 1e-9 else math.tanh(sig) / sig
         dvec[i] = d_lat * g
         dvec[4 + i] = d_long * g
-    # K = M + dt (A^T D A + joint damping)
-    for p in range(9):
-        for q in range(9):
-            t = 0.0
-            for j in range(8):
-                t += A[j, p] * dvec[j] * A[j, q]
-            K[p, q] = M[p, q] + dt * t
-    joint_d = np.zeros(9)
-    joint_e = np.zeros(9)
-    joint_d[3], joint_e[3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], M[3, 3], dt)
-    joint_d[4], joint_e[4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], M[4, 4], dt)
+    # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
+    _iteration_matrix(M, A, dvec, dt, K)
+    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], M[3, 3], dt)
+    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], M[4, 4], dt)
     for i in range(4):
-        joint_d[5 + i], joint_e[5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], M[5 + i, 5 + i], dt)
+        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], M[5 + i, 5 + i], dt)
     for q in range(3, 9):
-        K[q, q] += dt * joint_d[q]
-    # right-hand side M v - dt h + dt B u (+ stops)
-    for p in range(9):
+        K[q, q] += dt * jf[0, q]
+    # right-hand side M v - dt h + dt B u (+ stops); M is zero outside 0-4 but on the diagonal
+    for p in range(5):
         t = 0.0
-        for q in range(9):
+        for q in range(5):
             t += M[p, q] * vel[q]
         rhs[p] = t - dt * h[p]
+    for p in range(5, 9):
+        rhs[p] = (0.0 + M[p, p] * vel[p]) - dt * h[p]
     for i in range(4):
         rhs[5 + i] += dt * c[_IG] * torque[i]
     for q in range(3, 9):
-        rhs[q] -= dt * joint_e[q]
-    stop_k = np.zeros(2)
-    stop_pen = np.zeros(2)
-    for j in range(2):
-        lim = 0.5 * math.pi
-        pen = alpha[j] - lim if alpha[j] > lim else (alpha[j] + lim if alpha[j] < -lim else 0.0)
+        rhs[q] -= dt * jf[1, q]
+    lim = 0.5 * math.pi
+    pen0 = alpha[0] - lim if alpha[0] > lim else (alpha[0] + lim if alpha[0] < -lim else 0.0)
+    pen1 = alpha[1] - lim if alpha[1] > lim else (alpha[1] + lim if alpha[1] < -lim else 0.0)
+    for j, pen in ((0, pen0), (1, pen1)):
         if pen != 0.0:
-            stop_k[j] = 1.0
-            stop_pen[j] = pen
             K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
             rhs[3 + j] -= dt * c[_KSTOP] * pen
     _cholesky_solve(K, rhs, 9)
@@ -227,17 +311,15 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
     for i in range(4):
         p_motor += c[_IG] * torque[i] * rhs[5 + i]
     p_diss = 0.0
+    _slip_velocities(A, rhs, slip)
     for j in range(8):
-        t = 0.0
-        for q in range(9):
-            t += A[j, q] * rhs[q]
-        p_diss += dvec[j] * t * t
+        p_diss += dvec[j] * slip[j] * slip[j]
     for q in range(3, 9):
-        p_diss += (joint_d[q] * rhs[q] + joint_e[q]) * rhs[q]
+        p_diss += (jf[0, q] * rhs[q] + jf[1, q]) * rhs[q]
     p_stop = 0.0
-    for j in range(2):
-        if stop_k[j] != 0.0:
-            p_stop -= (c[_KSTOP] * (stop_pen[j] + dt * rhs[3 + j]) + c[_DSTOP] * rhs[3 + j]) * rhs[3 + j]
+    for j, pen in ((0, pen0), (1, pen1)):
+        if pen != 0.0:
+            p_stop -= (c[_KSTOP] * (pen + dt * rhs[3 + j]) + c[_DSTOP] * rhs[3 + j]) * rhs[3 + j]
     work[0] += dt * p_motor
     work[1] += dt * p_diss
     work[2] += dt * p_stop
@@ -250,6 +332,7 @@ def plant_step(c, pos, vel, torque, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
         pos[q] += dt * rhs[q]
     for q in range(9):
         vel[q] = rhs[q]
+    return 0.5 * energy
 
 
 @njit(cache=True)
@@ -276,28 +359,22 @@ def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
     V = np.zeros((n + 1, 9))
     E = np.zeros(n + 1)
     W = np.zeros((n + 1, 3))
-    M = np.zeros((9, 9))
-    A = np.zeros((8, 9))
-    K = np.zeros((9, 9))
-    h = np.zeros(9)
-    rhs = np.zeros(9)
-    slip = np.zeros(8)
-    dvec = np.zeros(8)
+    ws = workspace()
     work = np.zeros(3)
     dt = dt_sample / substeps
     P[0] = pos
     V[0] = vel
-    E[0] = kinetic_energy(c, pos, vel, M)
+    E[0] = kinetic_energy(c, pos, vel, ws[0])
     tq = np.zeros(4)
     mu_w = np.ones(4)
     for k in range(n):
         for i in range(4):
             tq[i] = min(max(torques[k, i], -c[_TLIM]), c[_TLIM])
         for j in range(substeps):
-            plant_step(c, pos, vel, tq, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
+            plant_step(c, pos, vel, tq, dt, work, mu_w, ws)
         P[k + 1] = pos
         V[k + 1] = vel
-        E[k + 1] = kinetic_energy(c, pos, vel, M)
+        E[k + 1] = kinetic_energy(c, pos, vel, ws[0])
         W[k + 1] = work
     return P, V, E, W
 
@@ -307,7 +384,8 @@ def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
 @njit(cache=True)
 def _contact_point(c, pos, i):
     """World position (X, Y) of the contact point of wheel i: steering axis plus a along the axle."""
-    side, s, h, cx, cy, th = _unit_geometry(c, pos[3:5], i)
+    side, s, h, cx, cy = _unit_frame(c, i)
+    th = h * pos[3 + side]
     px = cx - s * c[_A] * math.sin(th)
     py = cy + s * c[_A] * math.cos(th)
     cg, sg = math.cos(pos[2]), math.sin(pos[2])
@@ -347,15 +425,14 @@ def slip_speeds(c, positions, velocities):
     n = positions.shape[0]
     out = np.zeros((n, 4))
     A = np.zeros((8, 9))
+    tr = np.zeros((4, 2))
+    s = np.zeros(8)
     for k in range(n):
-        constraint_matrix_into(c[_L], c[_B], c[_A], c[_RW:_RW + 4], positions[k, 3], positions[k, 4], A)
+        _unit_trig(positions[k, 3:5], tr)
+        _constraint_rows(c, tr, A)
+        _slip_velocities(A, velocities[k], s)
         for i in range(4):
-            lat = 0.0
-            lon = 0.0
-            for q in range(9):
-                lat += A[i, q] * velocities[k, q]
-                lon += A[4 + i, q] * velocities[k, q]
-            out[k, i] = math.sqrt(lat * lat + lon * lon)
+            out[k, i] = math.sqrt(s[i] * s[i] + s[4 + i] * s[4 + i])
     return out
 
 
@@ -461,13 +538,7 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
     not know them, the torque sensors measure them); ``patches`` (P, 7) floor patches of reduced
     mu (see :func:`patch_factors`) at the sample times ``t`` (N,) plus the substep offsets.
     """
-    M = np.zeros((9, 9))
-    A = np.zeros((8, 9))
-    K = np.zeros((9, 9))
-    h = np.zeros(9)
-    rhs = np.zeros(9)
-    slip = np.zeros(8)
-    dvec = np.zeros(8)
+    ws = workspace()
     alpha_m = np.zeros(2)
     beta_m = np.zeros(4)
     u = np.zeros(4)
@@ -487,7 +558,6 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
         out_vel[k] = vel
         out_alpha[k] = alpha_m
         out_beta[k] = beta_m
-        out_energy[k] = kinetic_energy(c, pos, vel, M)
         out_work[k] = work
         for i in range(4):
             out_cmd[k, i] = u[i]
@@ -496,4 +566,6 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
         for j in range(substeps):
             if n_patches > 0:
                 patch_factors(c, pos, t[k] + j * dt, patches, mu_w)
-            plant_step(c, pos, vel, ua, dt, work, M, A, K, h, rhs, slip, dvec, mu_w)
+            e = plant_step(c, pos, vel, ua, dt, work, mu_w, ws)
+            if j == 0:  # the energy at the sample, from the step's M(alpha)
+                out_energy[k] = e
