@@ -194,13 +194,12 @@ def run_job(job: BatchJob) -> list[dict[str, Any]]:
     """Identify one job; rows of the batch table (one per parameter, or one carrying the error)."""
     t0 = time.perf_counter()
     try:
-        from agvdyn.identification import identify, load_logs, platform_for
+        from agvdyn.identification import identify
         from agvdyn.platform import PARAMETER_NAMES
 
         settings = job.identification_settings()
-        logs = load_logs(list(job.logs), mapping=job.mapping, platform=job.platform)
-        geometry = platform_for(logs, job.platform)
-        ident = identify(logs, geometry, fixed=job.fixed(), settings=settings)
+        ident = identify(list(job.logs), job.platform, fixed=job.fixed(), settings=settings, mapping=job.mapping,
+                         keep_blocks=False)
     except Exception as exc:  # noqa: BLE001 - a failed job is a row, never a failed batch
         return [_error_row(job, _message(exc), time.perf_counter() - t0)]
     seconds = time.perf_counter() - t0

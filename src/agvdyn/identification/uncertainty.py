@@ -77,23 +77,27 @@ def _step_scores(est: Estimator, data: RegressionData) -> Iterator[np.ndarray]:
     for rec, w in _recording_weights(est, data):
         idx = rec.step - int(rec.step.min())
         scores = rec.A * (w * (rec.y - rec.A @ coef))[:, None]
-        dense = np.zeros((int(idx.max()) + 1, scores.shape[1]))
-        for j in range(scores.shape[1]):
-            dense[:, j] = np.bincount(idx, weights=scores[:, j], minlength=dense.shape[0])
-        yield dense
+        T, p = int(idx.max()) + 1, scores.shape[1]
+        flat = (idx[:, None] * p + np.arange(p)).ravel()
+        yield np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
 
 
 def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 17) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
     ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
 
-    Each recording contributes at most its first ``max_steps`` steps (the correlation times are
-    tens to hundreds of steps): the cost does not grow with the length of the log.
+    Each recording contributes at most its first ``max_steps`` steps, and recordings are pooled
+    until ``4 * max_steps`` steps (the correlation times are tens to hundreds of steps): the cost
+    does not grow with the length or the number of the logs.
     """
     acf = None
+    pooled = 0
     for x in series:
+        if pooled >= 4 * max_steps:
+            break
         p = x.shape[1]
         x = x[:max_steps]
+        pooled += x.shape[0]
         n = x.shape[0]
         size = scipy.fft.next_fast_len(2 * n, real=True)
         f = scipy.fft.rfft(x, size, axis=0, workers=-1)

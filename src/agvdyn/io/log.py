@@ -201,7 +201,8 @@ def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
     if not side.exists():
         return {}
     try:
-        data = yaml.safe_load(side.read_text(encoding="utf-8"))
+        # libyaml's parser when PyYAML has it: sidecars carry the trajectory, ~10x faster
+        data = yaml.load(side.read_text(encoding="utf-8"), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except yaml.YAMLError as exc:
         raise LogError(f"{side}: sidecar is not valid YAML: {exc}") from exc
     if data is None:
