@@ -227,6 +227,18 @@ class RegressionData:
         return cls(A, y, index.group, index.group_names, np.bincount(index.group, minlength=len(index.group_names)),
                    A.shape[0], False, tuple(range(p)), np.zeros(p), store=store, row_order=order)
 
+    def holding(self, columns: Sequence[int], values: np.ndarray) -> "RegressionData":
+        """The same system with the free columns at positions ``columns`` held at ``values`` (moved
+        to the right like the fixed parameters of eq. 24)."""
+        keep = [i for i in range(len(self.free)) if i not in set(columns)]
+        held = [self.free[i] for i in columns]
+        theta_fixed = self.theta_fixed.copy()
+        theta_fixed[held] = values
+        shift = self.A[:, list(columns)] @ np.asarray(values, dtype=float)
+        pseudo = tuple(np.column_stack([P[:, keep], P[:, -1] - P[:, list(columns)] @ values]) for P in self.key_pseudo)
+        return dataclasses.replace(self, A=self.A[:, keep], y=self.y - shift, free=tuple(self.free[i] for i in keep),
+                                   theta_fixed=theta_fixed, key_pseudo=pseudo)
+
     def theta(self, coef: np.ndarray) -> np.ndarray:
         """All columns' values (fixed ones as given) from the free ones."""
         theta = self.theta_fixed.copy()

@@ -140,15 +140,27 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         raise UnidentifiableError(
             [Dependency(n, (), 0.0) for n in free],
             f"{data.n_rows} equation rows left after the stiction mask for {len(free)} parameters; ")
+    report = settings.reports_unexcited
+    warnings: list[str] = []
     missing = dependent_parameters(A1, free, tolerance=settings.rank_tolerance)
-    if missing:
+    unbounded: set[str] = set()
+    if missing and not report:
         raise UnidentifiableError(missing)
+    if missing:  # held at zero (bounded: their lower bound); they and their group get unbounded intervals
+        unbounded, hold, warnings = _unexcited(missing, free, est)
+        data = data.holding([free.index(n) for n in hold], np.array(list(hold.values())))
+        free = [n for n in free if n not in hold]
+        idx_free = [names.index(n) for n in free]
+        for n, v in hold.items():
+            p_fixed[names.index(n)] = v
+        A1, y1 = data.A, data.y
     inflation = variance_inflation(A1)
     collinear = [Dependency(n, (), math.nan, inflation=float(v)) for n, v in zip(free, inflation)
                  if v > settings.max_inflation and n in PARAMETER_NAMES]
-    if collinear:
+    if collinear and not report:
         raise UnidentifiableError(collinear, f"poorly conditioned data (variance inflation above "
                                              f"{settings.max_inflation:g}): ")
+    warnings += [f"poorly conditioned: {d.describe()}" for d in collinear]
     pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
     est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
     unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
@@ -173,23 +185,29 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     theta[idx_free] = est.coef_
     p = theta[:N_P]
     offsets = theta[N_P:] if with_offsets else None
-    all_std = dict(zip(free, sd_all.tolist()))
+    all_std = {n: (math.inf if n in unbounded else v) for n, v in zip(free, sd_all.tolist())}
     std = {n: v for n, v in all_std.items() if n in PARAMETER_NAMES}
-    std_classic = {n: float(v) for n, v in zip(free, est.std_) if n in PARAMETER_NAMES}
-    correlation = _correlation(unc.cov, free)
+    std_classic = {n: (math.inf if n in unbounded else float(v)) for n, v in zip(free, est.std_)
+                   if n in PARAMETER_NAMES}
+    correlation = _correlation(unc.cov, free, unbounded)
     residual_rms = data.residual_rms(est.coef_)
-    warnings: list[str] = []
+    for n in unbounded - set(free):  # held parameters
+        all_std[n] = math.inf
+        if n in PARAMETER_NAMES:
+            std[n] = std_classic[n] = math.inf
     if settings.plausibility:
-        refused, warnings = implausible_parameters({n: float(v) for n, v in zip(free, est.coef_)
-                                                    if n in PARAMETER_NAMES}, std)
+        refused, implausible = implausible_parameters({n: float(v) for n, v in zip(free, est.coef_)
+                                                       if n in PARAMETER_NAMES and n not in unbounded}, std)
         if refused:
             raise ImplausibleError(refused, None, "")
+        warnings += implausible
     noisy = [Dependency(n, (), math.nan, relative_std=float(sd / abs(v)))
              for n, v, sd in zip(free, est.coef_, sd_all)
-             if n in PARAMETER_NAMES and sd > settings.max_relative_std * abs(v)]
-    if noisy:
+             if n in PARAMETER_NAMES and n not in unbounded and sd > settings.max_relative_std * abs(v)]
+    if noisy and not report:
         raise UnidentifiableError(noisy, f"weakly excited data (standard deviation above "
                                          f"{100 * settings.max_relative_std:g} % of the value): ")
+    warnings += [f"weakly excited: {d.describe()}" for d in noisy]
     return Identification(
         parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
         condition_number=cond, condition_number_unscaled=cond_unscaled,
@@ -206,10 +224,34 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         slip_thresholds=dict(slip_thresholds or {}), warnings=tuple(warnings))
 
 
-def _correlation(cov: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
-    """Correlation matrix of the estimated parameters (offsets left out)."""
+def _unexcited(missing: Sequence[Dependency], free: Sequence[str], est: Estimator
+               ) -> tuple[set[str], dict[str, float], list[str]]:
+    """For ``unexcited="report"``: the parameters whose interval is unbounded (not excited, or
+    excited only together with others), the values the unexcited ones are held at (zero, or the
+    lower bound of ``bounded``) and the warnings naming them."""
+    from agvdyn.identification.estimators import PHYSICAL_BOUNDS, Bounded
+
+    bounds = {**PHYSICAL_BOUNDS, **dict(est.bounds or {})} if isinstance(est, Bounded) else {}
+    hold = {d.name: max(0.0, float(bounds.get(d.name, (0.0, math.inf))[0])) for d in missing}
+    unbounded = set(hold)
+    warnings = []
+    for d in missing:
+        warnings.append(f"not identified, 95 % interval unbounded (value held at {hold[d.name]:g}): {d.describe()}")
+        unbounded |= set(d.combination_of)
+    for rep in sorted(unbounded - set(hold), key=list(free).index):
+        group = [d.name for d in missing if rep in d.combination_of]
+        warnings.append(f"{rep} carries the combination of {rep} with {', '.join(group)} (their columns are "
+                        "dependent in these data): its value is the group's, its 95 % interval is unbounded")
+    return unbounded, hold, warnings
+
+
+def _correlation(cov: np.ndarray, names: Sequence[str], unbounded: set[str] = frozenset()) -> dict[str, Any]:
+    """Correlation matrix of the estimated parameters (offsets left out; 0 for unbounded ones)."""
     keep = [i for i, n in enumerate(names) if n in PARAMETER_NAMES]
-    c = cov[np.ix_(keep, keep)]
+    c = cov[np.ix_(keep, keep)].copy()
+    for k, i in enumerate(keep):
+        if names[i] in unbounded:
+            c[k, :] = c[:, k] = 0.0
     d = np.sqrt(np.maximum(np.diag(c), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         r = c / np.outer(d, d)

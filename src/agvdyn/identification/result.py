@@ -75,12 +75,17 @@ class Identification:
         return (v - 1.959964 * s, v + 1.959964 * s)
 
     def _parameter_entries(self) -> dict[str, dict[str, Any]]:
+        """Per parameter value, std, ci95, std_classic; an unbounded interval (not excited) is
+        ``std: null, ci95: [null, null], identified: false`` (JSON has no infinity)."""
         out = {}
         for n in PARAMETER_NAMES:
             entry: dict[str, Any] = {"value": getattr(self.parameters, n), "std": self.std.get(n)}
             if n in self.std:
-                entry["ci95"] = list(self.ci95(n))
-                entry["std_classic"] = self.std_classic.get(n)
+                bounded = math.isfinite(self.std[n])
+                entry["ci95"] = list(self.ci95(n)) if bounded else [None, None]
+                entry["std_classic"] = self.std_classic.get(n) if bounded else None
+                entry["std"] = self.std[n] if bounded else None
+                entry["identified"] = bounded
             out[n] = entry
         return out
 

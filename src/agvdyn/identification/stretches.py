@@ -22,7 +22,8 @@ from agvdyn.odometry import odometry_with_slip
 from agvdyn.platform import Geometry
 from agvdyn.signals import filtered_derivatives, lowpass, time_derivative, uniform_sample_time
 
-__all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows"]
+__all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
+           "torque_lead", "align_torque"]
 
 
 def log_source(log: Any) -> str:
@@ -64,6 +65,33 @@ class Stretch:
     @property
     def q_dot(self) -> np.ndarray:
         return np.concatenate([self.chassis_dot, self.alpha_dot, self.beta_dot], axis=1)
+
+
+def torque_lead(log: Any, settings: IdentificationSettings) -> float:
+    """Samples by which a log's torques lead its angles: ``settings.torque_lead``, else the sidecar's
+    ``torque_lead`` (``agvdyn.simulation`` writes 0.5), else 0."""
+    if settings.torque_lead is not None:
+        return float(settings.torque_lead)
+    sidecar = getattr(log, "sidecar", None)
+    value = sidecar.get("torque_lead") if isinstance(sidecar, dict) else None
+    if value is None:
+        return 0.0
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
+        raise ValueError(f"{log_source(log)}: sidecar torque_lead={value!r}: expected a number of samples in [0, 1]")
+    return float(value)
+
+
+def align_torque(torque: np.ndarray, lead: float) -> np.ndarray:
+    """Torques at the instants of the angle samples: ``(1 - lead) m[k] + lead m[k - 1]`` (first row kept).
+
+    A zero-order-hold drive applies the torque logged in row k from t_k to t_k + T_s; around t_k
+    it acts as the mean of the held values before and after, ``(m[k - 1] + m[k]) / 2`` (lead 0.5).
+    """
+    if lead == 0 or torque.shape[0] < 2:
+        return torque
+    out = torque.copy()
+    out[1:] = (1.0 - lead) * torque[1:] + lead * torque[:-1]
+    return out
 
 
 def edge_rows(settings: IdentificationSettings, dt: float) -> int:
@@ -119,7 +147,7 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     q_dot = np.concatenate([chassis_dot, alpha_dot, beta_dot], axis=1)
     q_ddot = np.concatenate([chassis_ddot, alpha_ddot, beta_ddot], axis=1)
     signals = regressor_signals(q_dot, q_ddot, settings.epsilon)
-    torque = np.asarray(log.torque[sl], dtype=float)
+    torque = align_torque(np.asarray(log.torque[sl], dtype=float), torque_lead(log, settings))
     if settings.filtering is Filtering.PARALLEL:
         both = lowpass(np.concatenate([signals, torque], axis=1), dt, settings.filter)
         signals, torque = both[:, :-4], both[:, -4:]

@@ -289,6 +289,9 @@ class SimulationResult:
             "true_parameters": self.plant_params.to_dict(),
             "controller_parameters": self.controller_params.to_dict(),
             "seed": int(self.seed),
+            # the torque of row k is held over [t_k, t_k + T_s) (zero-order hold): seen from the
+            # angle samples it leads by half a sample (IdentificationSettings.torque_lead)
+            "torque_lead": 0.5,
             "settings": self.settings.to_dict(),
             "plant": _plant_facts(self.geometry, self.plant_params, self.settings.plant),
             "floor_space": {"length": fs.length, "width": fs.width},
