@@ -137,3 +137,23 @@ def test_plan_section_in_chromium(found):
     assert img["complete"] and img["naturalWidth"] > 300 and img["width"] > 300
     ink, spread = image_statistics(shots[0])
     assert 0.01 < ink < 0.9 and spread > 10
+
+
+def test_a_plan_file_of_the_same_name_but_another_floor_is_not_shown(files, tmp_path):
+    """The sidecar records the floor the simulated trajectory occupied: a different plan under the same
+    name is left out with a note, and the report's API takes a plan for results computed elsewhere."""
+    from agvdyn.identification import identify
+    from agvdyn.report import excitation_plan, report_of
+
+    side = yaml.safe_load(open(f"{files['log']}.yaml", encoding="utf-8"))
+    side["floor_space"] = {"length": 9.0, "width": 9.0}
+    shutil.copy(files["log"], tmp_path / "ident.parquet")
+    (tmp_path / "ident.parquet.yaml").write_text(yaml.safe_dump(side), encoding="utf-8")
+    shutil.copy(files["plan"], tmp_path / "quick_plan.yaml")
+    log = read_log(tmp_path / "ident.parquet")
+    plan, notes = excitation_plan([log], PROTOTYPE)
+    assert plan is None and "another plan" in notes[0] and str(tmp_path / "quick_plan.yaml") in notes[0]
+    ident = identify([read_log(files["log"])])
+    report = report_of(ident, plan=files["plan"])
+    assert report.plan.found == "given" and report.plan.driven == ()  # no logs given: nothing driven to draw
+    assert report.to_json_dict()["plan"]["path"] == str(files["plan"])

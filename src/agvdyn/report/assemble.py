@@ -348,10 +348,12 @@ def _plan(logs: Sequence[Any], geometry: Geometry, plan: PlanFile | str | os.Pat
 def report_of(identification: Identification, validation: Any = None, *, reference: Reference | None = None,
               logs: Sequence[Any] = (), validation_logs: Sequence[Any] = (), checked: Preflight | None = None,
               extra_files: Mapping[str, str | os.PathLike] | None = None, command: str | None = None,
-              title: str = "agvdyn identification report", max_nrmse: float = MAX_VALIDATION_NRMSE) -> Report:
+              title: str = "agvdyn identification report", max_nrmse: float = MAX_VALIDATION_NRMSE,
+              plan: PlanFile | str | os.PathLike | None = None) -> Report:
     """A report of results computed elsewhere (Python API, ``make demo``): the verdict from them; the
     data-quality section only when the identification ``logs`` (loaded) or a pre-flight ``checked``
-    are given; ``reference`` None: no comparison (see :func:`choose_reference`)."""
+    are given; ``reference`` None: no comparison (see :func:`choose_reference`); ``plan`` as
+    :func:`make_report` (found by the sidecars of ``logs`` when None)."""
     geometry, settings = identification.geometry, identification.settings
     fixed = {n: getattr(identification.parameters, n) for n in identification.fixed}
     logs = list(logs)
@@ -362,9 +364,12 @@ def report_of(identification: Identification, validation: Any = None, *, referen
     if not logs:  # at least the names the identification recorded
         extra.update({f"identification log {i + 1}": s for i, s in enumerate(identification.sources)
                       if s and s != "<log>"})
+    excitation, plan_notes = _plan(logs, geometry, plan, identification, reference)
+    if excitation is not None:
+        extra.setdefault("plan", excitation.file.path)
     prov = _provenance(logs, validation_logs, geometry, _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, identification, None, validation, checked, reference,
-                  _cuts(logs, settings) if logs else (), title)
+                  _cuts(logs, settings) if logs else (), title, excitation, plan_notes)
 
 
 def command_line() -> str:

@@ -181,14 +181,18 @@ def plan_of_logs(logs: Sequence[Any], geometry: Geometry) -> tuple[PlanFile | No
                 continue
             side = log.sidecar.get("floor_space")
             used = plan_file.trajectory.floor_space()
-            if isinstance(side, dict) and any(
-                    not isinstance(side.get(k), (int, float)) or abs(float(side[k]) - getattr(used, k)) > FLOOR_TOLERANCE
-                    for k in ("length", "width")):
+            if isinstance(side, dict) and not _same_floor(side, used):
                 notes.append(f"{path} not shown: it occupies {used.length:.3f} m x {used.width:.3f} m but the sidecar "
                              f"of {where} records {side.get('length')} m x {side.get('width')} m (another plan)")
                 continue
             return plan_file, tuple(notes)
     return None, tuple(notes)
+
+
+def _same_floor(recorded: Mapping[str, Any], used: FloorSpace) -> bool:
+    """True when a sidecar's ``floor_space`` is ``used`` within :data:`FLOOR_TOLERANCE`."""
+    return all(isinstance(recorded.get(k), (int, float))
+               and abs(float(recorded[k]) - getattr(used, k)) <= FLOOR_TOLERANCE for k in ("length", "width"))
 
 
 def driven_path(log: Any, geometry: Geometry) -> DrivenPath:
@@ -254,6 +258,11 @@ def excitation_plan(logs: Sequence[Any], geometry: Geometry, plan: PlanFile | st
 
 # --- the section ----------------------------------------------------------------------------------
 
+def _thin(a: np.ndarray, points: int = 4000) -> np.ndarray:
+    """Every k-th row of ``a``, at most about ``points`` rows (enough for a line at 1,200 px)."""
+    return a[::max(1, len(a) // points)]
+
+
 def plan_report_figure(plan: ExcitationPlan):
     """The floor (available, used, rotation circle) with the planned and driven paths, and the
     chassis pose over time, planned against driven."""
@@ -265,8 +274,7 @@ def plan_report_figure(plan: ExcitationPlan):
     from agvdyn.trajectories.planner.figure import draw_floor
 
     traj = plan.file.trajectory
-    step = max(1, traj.n_samples // 4000)
-    driven = [(f"driven, {Path(d.source).name}", d.pose[::step]) for d in plan.driven]
+    driven = [(f"driven, {Path(d.source).name}", _thin(d.pose)) for d in plan.driven]
     fig = Figure(figsize=(12, 5.6), layout="constrained")
     gs = fig.add_gridspec(3, 2, width_ratios=(1.15, 1), height_ratios=(1, 1, 0.22))
     ax = fig.add_subplot(gs[:2, 0])
@@ -276,14 +284,14 @@ def plan_report_figure(plan: ExcitationPlan):
     legend_ax.axis("off")
     legend_ax.legend(*ax.get_legend_handles_labels(), loc="center", ncol=3, fontsize=8)
     ax.set_title(f"Floor and chassis path ({plan.file.path.name})")
-    pose, t = traj.pose()[::step], traj.t[::step]
+    pose, t = _thin(traj.pose()), _thin(traj.t)
     panels = ((fig.add_subplot(gs[0, 1]), ((0, "X (m)"), (1, "Y (m)"))),
               (fig.add_subplot(gs[1:, 1]), ((2, "gamma (rad)"),)))
     for axis, columns in panels:
         for col, label in columns:
             line, = axis.plot(t, pose[:, col], lw=1.2, label=f"{label} planned")
             for d in plan.driven[:1]:
-                axis.plot(d.t[::step], d.pose[::step, col], ls="--", lw=1, color=line.get_color(),
+                axis.plot(_thin(d.t), _thin(d.pose)[:, col], ls="--", lw=1, color=line.get_color(),
                           label=f"{label} driven")
         for name, sl in traj.segment_slices():
             if name != "align":
@@ -334,7 +342,8 @@ def plan_html(plan: ExcitationPlan | None, notes: Sequence[str] = (), identifica
         cond += f"; {num(identification.condition_number, 4)} identified"
     facts.append(["cond(&Theta;<sub>1,w</sub><sup>T</sup>&Theta;<sub>1,w</sub>)", cond])
     durations = "; ".join(f"{num(d.t[-1], 4)}&nbsp;s driven" for d in plan.driven)
-    facts.append(["duration", f"{num(f.trajectory.duration, 4)}&nbsp;s planned" + (f"; {durations}" if durations else "")])
+    planned = f"{num(f.trajectory.duration, 4)}&nbsp;s planned"
+    facts.append(["duration", f"{planned}; {durations}" if durations else planned])
     parts = ['<section id="plan"><h2>Excitation plan</h2>',
              '<div class="scroll">' + table(None, facts, align="ll") + "</div>",
              img(plan_report_figure(plan), "Floor rectangle available (black), the rectangle the plan uses (dashed), "
