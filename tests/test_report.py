@@ -252,7 +252,8 @@ def test_cli_identify_json_keys_and_file(logs):
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert set(data["parameters"]) == set(PARAMETER_NAMES)
-    assert set(data["parameters"]["C_l"]) == {"value", "std", "ci95", "std_classic"}
+    assert set(data["parameters"]["C_l"]) == {"value", "std", "ci95", "std_classic", "identified"}
+    assert data["parameters"]["C_l"]["identified"] is True
     low, high = data["parameters"]["C_l"]["ci95"]
     assert low < data["parameters"]["C_l"]["value"] < high
     assert data["uncertainty"]["method"] == "hac" and data["uncertainty"]["bandwidth_steps"] >= 50

@@ -52,6 +52,14 @@ EstimatorOpt = Annotated[str, typer.Option(
          "slip down-weighted), bounded (masses, inertias > 0, frictions >= 0).")]
 UncertaintyOpt = Annotated[str, typer.Option(
     help="classic (eq. 25, iid rows), hac (Newey-West for correlated residuals) or bootstrap (moving blocks).")]
+UnexcitedOpt = Annotated[Optional[str], typer.Option(
+    help="refuse: parameters the data do not excite stop the identification, named; report: they get an "
+         "unbounded 95 % interval (std null) and a warning, the rest is identified. Default: report with "
+         "--estimator bounded, refuse otherwise.")]
+TorqueLeadOpt = Annotated[Optional[float], typer.Option(
+    help="Samples (0..1) by which each row's torque leads its angles: 0.5 for a drive that holds the logged "
+         "torque until the next sample (zero-order hold). Default: the sidecar's torque_lead (the simulator "
+         "writes 0.5), else 0.")]
 BandwidthOpt = Annotated[Optional[int], typer.Option(
     help="HAC bandwidth / bootstrap block in samples; default: twice the residuals' correlation time, at least 50.")]
 
@@ -83,7 +91,8 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
               steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
               slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = "hac",
-              bandwidth: Optional[int] = None) -> "IdentificationSettings":  # noqa: F821
+              bandwidth: Optional[int] = None, unexcited: Optional[str] = None,
+              torque_lead: Optional[float] = None) -> "IdentificationSettings":  # noqa: F821
     from agvdyn.identification import Filtering, IdentificationSettings
     from agvdyn.signals import FilterSettings
 
@@ -97,6 +106,7 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
             stiction_guard=guard, max_inflation=max_inflation, max_relative_std=max_relative_std,
             slip_threshold=slip_threshold, estimator=estimator, uncertainty=uncertainty, bandwidth=bandwidth,
+            unexcited=unexcited, torque_lead=torque_lead,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
     except ValueError as exc:
         raise fail(str(exc)) from exc
@@ -170,6 +180,8 @@ def identify(
     estimator: EstimatorOpt = "wls",
     uncertainty: UncertaintyOpt = "hac",
     bandwidth: BandwidthOpt = None,
+    unexcited: UnexcitedOpt = None,
+    torque_lead: TorqueLeadOpt = None,
     experiment: Annotated[str, typer.Option(
         "--experiment", help="auto (from the segment labels), vehicle, or lifted-wheel: the single-axis test "
                              "of sec. 7 (wheels off the ground) gives B_w and the wheel friction without load.")] = "auto",
@@ -181,7 +193,8 @@ def identify(
     """
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
+                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth,
+                         unexcited, torque_lead)
     # logs are read one at a time inside identify(): memory does not grow with their number
     ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False)
     try:
@@ -321,6 +334,8 @@ def report(
     estimator: EstimatorOpt = "wls",
     uncertainty: UncertaintyOpt = "hac",
     bandwidth: BandwidthOpt = None,
+    unexcited: UnexcitedOpt = None,
+    torque_lead: TorqueLeadOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify, validate and write one self-contained HTML report: verdict, data quality, excitation plan
@@ -332,7 +347,8 @@ def report(
 
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth)
+                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth,
+                         unexcited, torque_lead)
     try:
         ref = None if reference is None else reference_from_file(reference)
     except (ValueError, OSError) as exc:

@@ -76,8 +76,10 @@ class Estimator(ABC):
     right-hand side of eq. (24); ``groups`` (m,) the generalized coordinate of each row (weights
     and scales are per group), ``names`` the parameters of the columns. Pseudo-rows with the
     normal equations of the stacked rows (:mod:`agvdyn.identification.normal`) are given with
-    ``group_rows`` (stacked rows per group) and ``n_rows`` (all stacked rows); estimators that
-    need every residual (``robust``) refuse them (``needs_rows``).
+    ``group_rows`` (stacked rows per group), ``n_rows`` (all stacked rows) and optionally
+    ``group_rss(coef)`` (residual sum of squares per group over the stacked rows, exact where the
+    pseudo-rows lose digits to cancellation); estimators that need every residual (``robust``)
+    refuse them (``needs_rows``).
     """
 
     needs_rows: bool = False
@@ -90,7 +92,7 @@ class Estimator(ABC):
     @abstractmethod
     def fit(self, A: np.ndarray, y: np.ndarray, *, groups: np.ndarray | None = None,
             names: Sequence[str] | None = None, group_rows: np.ndarray | None = None,
-            n_rows: int | None = None) -> "Estimator":
+            n_rows: int | None = None, group_rss=None) -> "Estimator":
         ...
 
     @property
@@ -129,7 +131,7 @@ class LeastSquares(Estimator):
 
     name = "ols"
 
-    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "LeastSquares":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None, group_rss=None) -> "LeastSquares":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         coef, bread, cond, raw = _weighted_fit(A, y, None)
         self._finish(A, y, coef, bread, np.ones(A.shape[0]), cond, raw, n_rows)
@@ -154,15 +156,22 @@ class WeightedLeastSquares(Estimator):
         self.max_iter = max_iter
         self.tol = tol
 
-    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "WeightedLeastSquares":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None, group_rss=None
+            ) -> "WeightedLeastSquares":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         g = _group_codes(groups, A.shape[0])
+
+        def variance(coef):
+            if group_rss is None:
+                return _group_variance(y - A @ coef, g, group_rows)
+            return np.asarray(group_rss(coef)) / np.maximum(np.asarray(group_rows, dtype=float), 1.0)
+
         coef, *_ = _weighted_fit(A, y, None)
-        var = _group_variance(y - A @ coef, g, group_rows)
+        var = variance(coef)
         for self.n_iter_ in range(1, self.max_iter + 1):
             w = 1.0 / np.maximum(var[g], 1e-300)
             coef, bread, cond, raw = _weighted_fit(A, y, w)
-            new = _group_variance(y - A @ coef, g, group_rows)
+            new = variance(coef)
             done = np.max(np.abs(new / var - 1)) < self.tol
             var = new
             if done:
@@ -197,7 +206,7 @@ class Robust(Estimator):
             return np.where(np.abs(u) < c, (1 - (u / c) ** 2) ** 2, 0.0)
         raise ValueError(f"robust loss {self.loss!r}: expected 'huber' or 'tukey'")
 
-    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "Robust":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None, group_rss=None) -> "Robust":
         if group_rows is not None:
             raise ValueError("the robust estimator weighs every row: give it the stacked rows, not pseudo-rows")
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
@@ -235,7 +244,7 @@ class Bounded(Estimator):
     def __init__(self, bounds: Mapping[str, tuple[float, float]] | None = None) -> None:
         self.bounds = bounds
 
-    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None) -> "Bounded":
+    def fit(self, A, y, *, groups=None, names=None, group_rows=None, n_rows=None, group_rss=None) -> "Bounded":
         A, y = np.asarray(A, dtype=float), np.asarray(y, dtype=float)
         names = list(names) if names is not None else [f"p{i}" for i in range(A.shape[1])]
         table = {**PHYSICAL_BOUNDS, **dict(self.bounds or {})}
@@ -244,7 +253,7 @@ class Bounded(Estimator):
         if np.any(low > high):
             bad = [n for n, a, b in zip(names, low, high) if a > b]
             raise ValueError(f"bounds of {bad}: lower bound above upper bound")
-        wls = WeightedLeastSquares().fit(A, y, groups=groups, group_rows=group_rows, n_rows=n_rows)
+        wls = WeightedLeastSquares().fit(A, y, groups=groups, group_rows=group_rows, n_rows=n_rows, group_rss=group_rss)
         w = wls.weights_
         sw = np.sqrt(w)
         norms = column_norms(A * sw[:, None])

@@ -1,12 +1,14 @@
 """The stacked system of eq. (22) without stacking: per log, the kept rows are reduced to the
-normal matrix (Gram block) of ``[Theta_hat | tau_hat]`` per segment and generalized coordinate, and the rows themselves go to a compact store (spilled to
+triangular factor ``R`` of ``[Theta_hat | tau_hat]`` per segment and generalized coordinate
+(``R^T R`` is their Gram block, the normal matrix, without the round-off of forming it), and the rows themselves go to a compact store (spilled to
 disk beyond a memory budget) that only the HAC and bootstrap covariances read back, one
 continuous recording at a time. Many logs then cost one small solve, and memory does not grow
 with the number of logs.
 
-A factor ``P^T P = G`` of each key's block, with the fixed parameters moved to the right
-(eq. 24), gives *pseudo-rows*: a few rows per key with the normal equations, column norms, QR
-factor and per-coordinate residual sums of squares of the full stacked rows. The estimators that need
+The factors of all keys, with the fixed parameters moved to the right (eq. 24), are
+*pseudo-rows*: a few rows per key with the normal equations, column norms, QR factor and
+per-coordinate residual sums of squares of the full stacked rows. Solving on them gives the
+stacked answer to round-off (forming the Gram matrix instead would square the condition number). The estimators that need
 no single residual (``ols``, ``wls``, ``bounded``) solve on them the same problem as on the rows.
 """
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from agvdyn.dynamics import N_P
+from agvdyn.identifiability import triangular_factor
 from agvdyn.identification.equations import EquationBlock
 
 __all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "row_statistics", "regression_data",
@@ -100,20 +103,26 @@ class RowStore:
 
 @dataclass
 class RowStatistics:
-    """Normal matrices ``[A | y]^T [A | y]`` per (segment, coordinate), in the order first seen, and
-    their row counts. ``width``: columns of A (11 parameters, plus 4 offsets)."""
+    """Per (segment, coordinate), in the order first seen: the triangular factor ``R`` of its rows
+    ``[A | y]`` (``R^T R`` is their normal matrix, without the round-off of forming it) and the
+    row count. ``width``: columns of A (11 parameters, plus 4 offsets)."""
 
     width: int
-    grams: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    factors: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
     counts: dict[tuple[str, str], int] = field(default_factory=dict)
 
     def add(self, key: tuple[str, str], rows: np.ndarray) -> None:
-        """Add rows ``[A | y]`` (m, width + 1) to the normal matrix of ``key``."""
+        """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR)."""
         if rows.shape[0] == 0:
             return
-        gram = rows.T @ rows
-        old = self.grams.get(key)
-        self.grams[key] = gram if old is None else old + gram
+        old = self.factors.get(key)
+        stacked = rows if old is None else np.vstack([old, rows])
+        if stacked.shape[0] >= self.width + 1:
+            R = triangular_factor(stacked)
+        else:
+            R = np.zeros((self.width + 1, self.width + 1))
+            R[: stacked.shape[0]] = np.linalg.qr(stacked, mode="r")
+        self.factors[key] = R
         self.counts[key] = self.counts.get(key, 0) + rows.shape[0]
 
     @property
@@ -122,21 +131,14 @@ class RowStatistics:
 
     def key_code(self, key: tuple[str, str]) -> int:
         """Position of ``key`` among the keys (a new key gets the next one)."""
-        if key not in self.grams:
-            self.grams[key] = np.zeros((self.width + 1, self.width + 1))
+        if key not in self.factors:
+            self.factors[key] = np.zeros((self.width + 1, self.width + 1))
             self.counts[key] = 0
-        return list(self.grams).index(key)
+        return list(self.factors).index(key)
 
     def factor(self, key: tuple[str, str]) -> np.ndarray:
-        """``P`` (width + 1, width + 1) with ``P^T P`` the normal matrix of ``key``: pseudo-rows, from
-        the eigen-decomposition of the column-scaled normal matrix (positive semi-definite)."""
-        G = self.grams[key]
-        nz = np.flatnonzero(np.diag(G) > 0)  # columns that are exactly zero stay exactly zero
-        d = np.sqrt(np.diag(G)[nz])
-        lam, V = np.linalg.eigh(G[np.ix_(nz, nz)] / np.outer(d, d))
-        P = np.zeros_like(G)
-        P[: nz.size, nz] = (np.sqrt(np.clip(lam, 0.0, None))[:, None] * V.T) * d
-        return P
+        """Pseudo-rows ``R`` (width + 1, width + 1) of ``key``: ``R^T R`` is the normal matrix of its rows."""
+        return self.factors[key]
 
 
 def _block_rows(b: EquationBlock, offsets: bool) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
@@ -245,6 +247,15 @@ class RegressionData:
         theta[list(self.free)] = coef
         return theta
 
+    def group_rss(self, coef: np.ndarray) -> np.ndarray:
+        """Residual sum of squares per group over the stored rows (exact, where the pseudo-rows lose
+        digits to cancellation when the fit is close)."""
+        total = np.zeros(len(self.group_names))
+        for rec in self.recordings():
+            r = rec.y - rec.A @ coef
+            total += np.bincount(rec.group, weights=r * r, minlength=total.size)
+        return total
+
     def stacked(self) -> "RegressionData":
         """The same system with every stored row in memory (for estimators that weigh single rows)."""
         if self.store is None:
@@ -275,7 +286,7 @@ def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Seq
     T[width, -1] = 1.0
     blocks, codes, rows = [], [], []
     group_rows = np.zeros(len(group_names), dtype=np.int64)
-    for key in stats.grams:
+    for key in stats.factors:
         P = stats.factor(key) @ T
         blocks.append(P)
         code = group_names[key[1]]
@@ -285,7 +296,7 @@ def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Seq
     P = np.vstack(blocks) if blocks else np.zeros((0, len(free) + 1))
     return RegressionData(P[:, :-1], P[:, -1], np.concatenate(codes) if codes else np.zeros(0, np.int64),
                           tuple(group_names), group_rows, stats.n_rows, True, tuple(free), theta_fixed,
-                          tuple(stats.grams), tuple(rows), tuple(blocks), store)
+                          tuple(stats.factors), tuple(rows), tuple(blocks), store)
 
 
 def stacked_regression_data(blocks: Sequence[EquationBlock], free: Sequence[int], theta_fixed: np.ndarray, *,

@@ -162,7 +162,14 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
                                              f"{settings.max_inflation:g}): ")
     warnings += [f"poorly conditioned: {d.describe()}" for d in collinear]
     pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
+    if data.pseudo and data.store is not None:
+        pseudo["group_rss"] = data.group_rss
     est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
+    if data.pseudo and data.store is not None:  # eq. (25)'s sigma^2 from the rows themselves
+        weights = np.ones(len(data.group_names))
+        weights[data.group] = est.weights_
+        sigma2 = float(data.group_rss(est.coef_) @ weights) / (data.n_rows - len(free))
+        est.cov_, est.sigma2_ = est.cov_ * (sigma2 / est.sigma2_), sigma2
     unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
                                 replicates=settings.bootstrap_replicates, seed=settings.seed)
@@ -299,7 +306,9 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
         raise ValueError("no logs given: expected at least one log")
     geometry_in = platform if isinstance(platform, Geometry) else None
     load = (lambda x: x if hasattr(x, "alpha") else load_logs([x], mapping=mapping, platform=platform)[0])
-    first = load(items[0])
+    pieces = None if mapping is not None else _pieces_of
+    first = next(iter(pieces(items[0]) or [(None, None)]))[0] if pieces else None
+    first = first if first is not None else load(items[0])
     geometry = geometry_in if geometry_in is not None else platform_for([first], platform)
     from agvdyn.identification.lifted import identify_lifted, is_lifted, lifted_experiment
 
@@ -311,7 +320,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
         loaded = [first] + [load(x) for x in items[1:]]
         lifted_experiment(loaded, experiment)
         return identify_lifted(loaded, geometry, settings=settings, estimator=estimator)
-    stream = _LogStream(items, load, first, lifted=None if explicit else is_lifted)
+    stream = _LogStream(items, load, first, lifted=None if explicit else is_lifted, pieces=pieces)
     try:
         return _identify_stream(stream, geometry, fixed, settings, estimator, keep_blocks)
     except (UnidentifiableError, ImplausibleError) as exc:
@@ -333,19 +342,26 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
 
 
 class _LogStream:
-    """The logs of one identification, read one at a time (the first one already read)."""
+    """The logs of one identification as ``(log, core)``, read one at a time (the first one already
+    read); a long log in our schema comes in pieces (:func:`agvdyn.io.chunks.log_pieces`, ``core``
+    its own rows), any other whole (``core`` None)."""
 
-    def __init__(self, items: Sequence[Any], load: Any = None, first: Any = None, lifted: Any = None) -> None:
+    def __init__(self, items: Sequence[Any], load: Any = None, first: Any = None, lifted: Any = None,
+                 pieces: Any = None) -> None:
         self.items, self.load, self.first, self.lifted = list(items), load or (lambda x: x), first, lifted
+        self.pieces = pieces
 
     def __iter__(self):
         for k, item in enumerate(self.items):
+            if self.pieces is not None and not hasattr(item, "alpha") and self.pieces(item) is not None:
+                yield from self.pieces(item)
+                continue
             log = self.first if k == 0 and self.first is not None else self.load(item)
             if self.lifted is not None and self.lifted(log):
                 from agvdyn.identification.lifted import lifted_experiment
 
                 lifted_experiment([self.first, log], None)  # raises: lifted and vehicle logs mixed
-            yield log
+            yield log, None
 
 
 def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str, float],
@@ -364,8 +380,8 @@ def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str
     labels: set[str] = set()
     n_samples = 0
     try:
-        for log in logs:
-            rows = log_rows(log, geometry, settings)
+        for log, core in logs:
+            rows = log_rows(log, geometry, settings, core)
             row_statistics(rows.blocks, stats, store, names, offsets=settings.torque_offsets)
             if keep_blocks:
                 blocks += rows.blocks
@@ -373,9 +389,11 @@ def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str
             counts.add(rows.counts)
             events += rows.slip_events
             thresholds[rows.source] = rows.slip_threshold
-            sources.append(str(getattr(log, "path", None) or "<log>"))
+            source = str(getattr(log, "path", None) or "<log>")
+            if core is None or not sources or sources[-1] != source:  # pieces of one file: one source
+                sources.append(source)
             labels |= _labels_of(log)
-            n_samples += len(log.t)
+            n_samples += rows.counts.samples
         _check_segments_present(labels, settings)
         if not stats.n_rows:
             raise ValueError(
@@ -387,6 +405,15 @@ def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str
                               slip_thresholds=thresholds)
     finally:
         store.close()
+
+
+def _pieces_of(item: Any):
+    """Pieces of a long log file in our schema (:func:`agvdyn.io.chunks.log_pieces`), None otherwise."""
+    from agvdyn.io.chunks import is_long_log, log_pieces
+
+    if hasattr(item, "alpha") or not is_long_log(item):
+        return None
+    return log_pieces(item)
 
 
 def _labels_of(log: Any) -> set[str]:

@@ -148,7 +148,7 @@ def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndar
 
 
 def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: _Labels | None,
-                    settings: IdentificationSettings, recording: str) -> list[EquationBlock]:
+                    settings: IdentificationSettings, recording: str, mine: np.ndarray) -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there)."""
     guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
@@ -156,14 +156,14 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: n
     q_dot = st.q_dot
     blocks = []
     for a, b in runs(mode):
-        if mode[a] == NO_MODE or not usable[a:b].any():
+        if mode[a] == NO_MODE or not (usable[a:b] & mine[a:b]).any():
             continue
         m = Mode(int(mode[a]))
         block = projected_block(geometry, m, st.alpha[a:b], q_dot[a:b], st.signals[a:b], st.torque[a:b],
                                 t=st.t[a:b], source=st.source, segment=f"mode {m.label}",
                                 stiction_threshold=thresholds, mode_tolerance=settings.mode_tolerance,
                                 recording=recording, sample=np.arange(st.rows.start + a, st.rows.start + b))
-        block = block.with_keep(guarded_mask(block.keep & usable[a:b, None], guard))
+        block = block.with_keep(guarded_mask(block.keep & usable[a:b, None], guard) & mine[a:b, None])
         if labels is None:
             blocks.append(block)
             continue
@@ -173,19 +173,28 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: n
     return blocks
 
 
-def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()) -> LogRows:
-    """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped."""
+def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings(),
+             core: slice | None = None) -> LogRows:
+    """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped.
+
+    ``core``: for a piece of a longer log (:func:`agvdyn.io.chunks.log_pieces`), the rows that are
+    its own; the others (its neighbours' overlap) are filtered but neither used nor counted.
+    """
     source = log_source(log)
     t, alpha, beta = log.t, log.alpha, log.beta
     labels = _Labels.of(log)
-    counts = RowCounts(samples=int(t.size), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
+    own = np.ones(t.size, dtype=bool)
+    if core is not None:
+        own[:] = False
+        own[core] = True
+    counts = RowCounts(samples=int(own.sum()), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
     bounds, notes = stretch_bounds(t, alpha, beta, settings)
     notes = [f"{source}: {n}" for n in notes]
     min_rows = min_stretch_rows(settings, float(np.median(np.diff(t))))
     stretches, modes = [], np.zeros(t.size, dtype=np.int8)
     for a, b in bounds:
         if b - a <= min_rows:
-            counts.too_short += b - a
+            counts.too_short += int(own[a:b].sum())
             notes.append(f"{source}: rows {a}..{b - 1} ({b - a} samples) skipped: a continuous stretch needs more "
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
@@ -200,27 +209,30 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     blocks, events = [], []
     for k, (st, mode) in enumerate(in_mode):
         drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
+        if core is not None:  # an event belongs to the piece where it starts
+            ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
         events += ev
         if settings.segments is None:
             selected = np.ones(st.n, dtype=bool)
         else:
             selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(settings.segments, st.rows)
         in_a_mode = mode != NO_MODE
-        counts.edge += int(np.count_nonzero(st.edge))
+        mine = own[st.rows]  # the guards see the neighbours' rows; only the piece's own are used and counted
+        counts.edge += int(np.count_nonzero(st.edge & mine))
         rest = ~st.edge
-        counts.no_mode += int(np.count_nonzero(rest & ~in_a_mode))
+        counts.no_mode += int(np.count_nonzero(rest & ~in_a_mode & mine))
         rest &= in_a_mode
-        counts.not_selected += int(np.count_nonzero(rest & ~selected))
+        counts.not_selected += int(np.count_nonzero(rest & ~selected & mine))
         rest &= selected
-        counts.slip += int(np.count_nonzero(rest & drop_slip))
+        counts.slip += int(np.count_nonzero(rest & drop_slip & mine))
         usable = rest & ~drop_slip
-        counts.used += int(np.count_nonzero(usable))
-        for m in np.unique(mode[usable]):
+        counts.used += int(np.count_nonzero(usable & mine))
+        for m in np.unique(mode[usable & mine]):
             label = Mode(int(m)).label
-            counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & (mode == m)))
+            counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & mine & (mode == m)))
         if labels is not None:
             _count_mismatch(counts, labels, st.rows, mode)
-        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings, f"{source}#{k}")
+        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings, f"{source}#{k}", mine)
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
 
 
