@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from agvdyn.identification.estimators import Estimator
+from agvdyn.identification.rows import labels_present
 from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import filtered_stretch, log_source, min_stretch_rows, stretch_bounds
 from agvdyn.identification.normal import RegressionData, RowIndex
@@ -50,11 +51,7 @@ _SIGNAL = {"B_w": 9, "d_vw": 13, "d_cw": 17}  # columns of agvdyn.dynamics.REGRE
 
 def is_lifted(log: Any) -> bool:
     """Every labelled row of the log carries ``lifted_wheel`` (and some row is labelled)."""
-    seg = getattr(log, "segments", None)
-    if seg is None:
-        return False
-    labels = {str(s) for s in np.unique(seg) if str(s)}
-    return labels == {LIFTED_LABEL}
+    return labels_present(log) == {LIFTED_LABEL}
 
 
 def lifted_experiment(logs: Sequence[Any], experiment: str | None) -> bool:

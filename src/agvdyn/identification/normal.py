@@ -75,16 +75,18 @@ class RowStore:
         if self._folder is None:
             self._folder = Path(tempfile.mkdtemp(prefix="agvdyn-rows-"))
             self._cleanup = weakref.finalize(self, shutil.rmtree, self._folder, True)
-        path = self._folder / f"{len(self._items)}.npz"
-        np.savez(path, A=rows.A, y=rows.y, group=rows.group, step=rows.step,
-                 **({} if rows.key is None else {"key": rows.key}))
+        path = self._folder / f"{len(self._items)}.npy"  # one plain array: no zip on the way back
+        key = np.full(rows.y.size, -1) if rows.key is None else rows.key
+        np.save(path, np.column_stack([rows.A, rows.y, rows.group, rows.step, key]))
         self._items.append(path)
 
     def __iter__(self) -> Iterator[RecordingRows]:
         for item in self._items:
             if isinstance(item, Path):
-                with np.load(item) as f:
-                    yield RecordingRows(f["A"], f["y"], f["group"], f["step"], f["key"] if "key" in f else None)
+                x = np.load(item)
+                key = x[:, -1].astype(np.int16)
+                yield RecordingRows(x[:, :-4], x[:, -4], x[:, -3].astype(np.int8), x[:, -2].astype(np.int64),
+                                    None if key.size and key[0] < 0 else key)
             else:
                 yield item
 

@@ -38,7 +38,7 @@ from agvdyn.identification.regression import (
 )
 from agvdyn.identification.uncertainty import parameter_uncertainty
 from agvdyn.identification.result import Identification
-from agvdyn.identification.rows import RowCounts, log_rows
+from agvdyn.identification.rows import RowCounts, labels_present, log_rows
 from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.slip import SlipEvent
 from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE, Geometry, Parameters, read_platform
@@ -162,8 +162,6 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
                                              f"{settings.max_inflation:g}): ")
     warnings += [f"poorly conditioned: {d.describe()}" for d in collinear]
     pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
-    if data.pseudo and data.store is not None:
-        pseudo["group_rss"] = data.group_rss
     est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
     if data.pseudo and data.store is not None:  # eq. (25)'s sigma^2 from the rows themselves
         weights = np.ones(len(data.group_names))
@@ -392,7 +390,7 @@ def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str
             source = str(getattr(log, "path", None) or "<log>")
             if core is None or not sources or sources[-1] != source:  # pieces of one file: one source
                 sources.append(source)
-            labels |= _labels_of(log)
+            labels |= labels_present(log)
             n_samples += rows.counts.samples
         _check_segments_present(labels, settings)
         if not stats.n_rows:
@@ -414,11 +412,6 @@ def _pieces_of(item: Any):
     if hasattr(item, "alpha") or not is_long_log(item):
         return None
     return log_pieces(item)
-
-
-def _labels_of(log: Any) -> set[str]:
-    segments = getattr(log, "segments", None)
-    return set() if segments is None else {str(x) for x in np.unique(segments) if str(x)}
 
 
 def _check_segments_present(present: set[str], settings: IdentificationSettings) -> None:

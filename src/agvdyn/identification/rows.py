@@ -31,7 +31,7 @@ from agvdyn.kinematics import Mode, detect_mode, icr_residual, kinematic_model
 from agvdyn.platform import Geometry
 from agvdyn.signals import guarded_mask, runs
 
-__all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations"]
+__all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations", "labels_present"]
 
 #: Motion mode of the rows each segment label names (PLATFORM.md); only for counting disagreements.
 LABEL_MODES: dict[str, tuple[Mode, ...]] = {
@@ -129,6 +129,15 @@ class _Labels:
 
     def selected(self, wanted: tuple[str, ...], sl: slice) -> np.ndarray:
         return np.isin(self.codes[sl], [i for i, n in enumerate(self.names) if n in wanted])
+
+
+def labels_present(log: Any) -> set[str]:
+    """The segment labels a log carries (empty without a segment column)."""
+    labels = _Labels.of(log)
+    if labels is None:
+        return set()
+    counts = np.bincount(labels.codes, minlength=len(labels.names))
+    return {n for n, c in zip(labels.names, counts) if c and n}
 
 
 def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndarray) -> None:

@@ -82,13 +82,13 @@ def _step_scores(est: Estimator, data: RegressionData) -> Iterator[np.ndarray]:
         yield np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
 
 
-def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 17) -> np.ndarray:
+def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 15) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
     ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
 
-    Each recording contributes at most its first ``max_steps`` steps, and recordings are pooled
-    until ``4 * max_steps`` steps (the correlation times are tens to hundreds of steps): the cost
-    does not grow with the length or the number of the logs.
+    Each recording contributes at most its first ``max_steps`` steps (65 s at 500 Hz), and
+    recordings are pooled until ``4 * max_steps`` steps: the correlation times are tens to hundreds
+    of steps, so this is plenty, and the cost does not grow with the length or number of the logs.
     """
     acf = None
     pooled = 0
