@@ -17,6 +17,13 @@ from numba import njit
  _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
 _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 
+#: Compiled and cached; a division by zero gives inf or nan (caught as divergence) instead of a
+#: Python exception, which spares a check at every division.
+_jit = njit(cache=True, error_model="numpy")
+#: The same for kernels that allocate nothing: without numba's runtime (NRT) they take their arrays
+#: without reference counting (about 30 atomic operations per plant step, ~9 % of the loop).
+_jit_borrow = njit(cache=True, error_model="numpy", _nrt=False)
+
 
 # --- plant (see plant.py) ---
 #
@@ -24,7 +31,7 @@ _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 # walks only the nonzero entries of A(alpha) and M(alpha), in the order of the dense sums, so the
 # results equal those of the dense products bit for bit.
 
-@njit(cache=True)
+@_jit_borrow
 def _unit_frame(c, i):
     """Side index, side sign, heading sign and steering axis position of wheel i."""
     side = 0 if i < 2 else 1
@@ -33,16 +40,17 @@ def _unit_frame(c, i):
     return side, s, h, c[_L] / 2 * h, c[_B] / 2 * s
 
 
-@njit(cache=True)
-def _unit_trig(alpha, tr):
+@_jit_borrow
+def _unit_trig(alpha_l, alpha_r, tr):
     """cos and sin (4, 2) of each wheel's heading h_i alpha_side (cos and sin are even and odd)."""
     for j in range(2):
-        ca, sa = math.cos(alpha[j]), math.sin(alpha[j])
+        a = alpha_l if j == 0 else alpha_r
+        ca, sa = math.cos(a), math.sin(a)
         tr[2 * j, 0], tr[2 * j, 1] = ca, sa
         tr[2 * j + 1, 0], tr[2 * j + 1, 1] = ca, -sa
 
 
-@njit(cache=True)
+@_jit_borrow
 def _mass_matrix_trig(c, tr, M):
     """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities) from the unit headings."""
     M[:, :] = 0.0
@@ -73,15 +81,15 @@ def _mass_matrix_trig(c, tr, M):
         M[5 + i, 5 + i] = c[_BW]
 
 
-@njit(cache=True)
+@_jit
 def _mass_matrix(c, alpha, M):
     """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities)."""
     tr = np.empty((4, 2))
-    _unit_trig(alpha, tr)
+    _unit_trig(alpha[0], alpha[1], tr)
     _mass_matrix_trig(c, tr, M)
 
 
-@njit(cache=True)
+@_jit_borrow
 def _bias_trig(c, tr, v, out):
     """Coriolis and centrifugal forces h(alpha, v) (9,) from the unit headings."""
     out[:] = 0.0
@@ -112,15 +120,15 @@ def _bias_trig(c, tr, v, out):
         out[3 + side] += m_u * (dpx * ax + dpy * ay)
 
 
-@njit(cache=True)
+@_jit
 def _bias(c, alpha, v, out):
     """Coriolis and centrifugal forces h(alpha, v) (9,) of the plant in body-frame velocities."""
     tr = np.empty((4, 2))
-    _unit_trig(alpha, tr)
+    _unit_trig(alpha[0], alpha[1], tr)
     _bias_trig(c, tr, v, out)
 
 
-@njit(cache=True)
+@_jit_borrow
 def _constraint_rows(c, tr, A):
     """The nonzero entries of A(alpha) (8, 9) of eq. (1)-(2) with the true rolling radii, as
     ``kinematics.constraint_matrix_into`` computes them; the structural zeros of A are left alone.
@@ -134,7 +142,7 @@ def _constraint_rows(c, tr, A):
         A[4 + i, 5 + i] = -c[_RW + i]
 
 
-@njit(cache=True)
+@_jit_borrow
 def _slip_velocities(A, v, out):
     """out = A v (8,) over the nonzero entries of A (summed in the order of the dense product)."""
     for i in range(4):
@@ -144,7 +152,7 @@ def _slip_velocities(A, v, out):
                       + A[4 + i, a] * v[a] + A[4 + i, 5 + i] * v[5 + i])
 
 
-@njit(cache=True)
+@_jit_borrow
 def _iteration_matrix(M, A, d, dt, K):
     """Lower triangle of K = M + dt A^T diag(d) A (9, 9) over the nonzero entries of A: the chassis
     columns 0-2 meet every row of A, steering side j the longitudinal rows 4 + 2j, 5 + 2j, wheel i row 4 + i."""
@@ -171,7 +179,7 @@ def _iteration_matrix(M, A, d, dt, K):
         K[p, p] = M[p, p] + dt * (0.0 + A[j, p] * d[j] * A[j, p])
 
 
-@njit(cache=True)
+@_jit_borrow
 def _coulomb(c, v, d_c):
     """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0)."""
     mode = c[_COUL]
@@ -195,7 +203,7 @@ def _coulomb(c, v, d_c):
     return level * (1.0 if v > 0 else -1.0), level / av, max(dlevel, 0.0)
 
 
-@njit(cache=True)
+@_jit_borrow
 def _friction_terms(c, v, d_v, d_c, inertia, dt):
     """Linearly-implicit friction of one joint: force = d * v_new + e.
 
@@ -210,10 +218,11 @@ def _friction_terms(c, v, d_v, d_c, inertia, dt):
     return d_v + slope, f - slope * v
 
 
-@njit(cache=True, error_model="numpy")
+@_jit_borrow
 def _cholesky_solve(K, rhs, n):
     """Solve K x = rhs in place (K symmetric positive definite, lower triangle read and
-    overwritten); returns x in rhs."""
+    overwritten by its Cholesky factor L); returns x in rhs. The forward substitution runs
+    column by column with the factorization (the same operations; a shorter chain of latencies)."""
     for j in range(n):
         d = K[j, j]
         for k in range(j):
@@ -225,11 +234,10 @@ def _cholesky_solve(K, rhs, n):
             for k in range(j):
                 t -= K[i, k] * K[j, k]
             K[i, j] = t / d
-    for i in range(n):
-        t = rhs[i]
-        for k in range(i):
-            t -= K[i, k] * rhs[k]
-        rhs[i] = t / K[i, i]
+        t = rhs[j]
+        for k in range(j):
+            t -= K[j, k] * rhs[k]
+        rhs[j] = t / d
     for i in range(n - 1, -1, -1):
         t = rhs[i]
         for k in range(i + 1, n):
@@ -237,7 +245,7 @@ def _cholesky_solve(K, rhs, n):
         rhs[i] = t / K[i, i]
 
 
-@njit(cache=True)
+@_jit
 def workspace():
     """Scratch arrays of :func:`plant_step`: M, K (9, 9), A (8, 9) (zeros kept), h, rhs (9,),
     slip, dvec (8,), joint friction (2, 9), unit headings (4, 2)."""
@@ -245,19 +253,18 @@ def workspace():
             np.zeros(8), np.zeros((2, 9)), np.zeros((4, 2)))
 
 
-@njit(cache=True, error_model="numpy")
-def plant_step(c, pos, vel, torque, dt, work, mu_w, ws):
+@_jit_borrow
+def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec, jf, tr):
     """Advance the plant by one linearly-implicit Euler step of length dt (in place); returns the
     kinetic energy 0.5 v^T M(alpha) v before the step.
 
     ``torque``: motor torques (4,) after the drive's limit; ``work`` (3,) accumulates
     (motor work, dissipated work, stop work) over the step, evaluated at the new velocities;
     ``mu_w`` (4,): factor on the friction coefficient of each wheel (1: the floor's mu);
-    ``ws``: scratch arrays from :func:`workspace`.
+    ``M`` .. ``tr``: scratch arrays from :func:`workspace` (explicit: no reference counting per step).
     """
-    M, K, A, h, rhs, slip, dvec, jf, tr = ws
-    alpha = pos[3:5]
-    _unit_trig(alpha, tr)
+    a_l, a_r = pos[3], pos[4]
+    _unit_trig(a_l, a_r, tr)
     _mass_matrix_trig(c, tr, M)
     _bias_trig(c, tr, vel, h)
     _constraint_rows(c, tr, A)
@@ -299,8 +306,8 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, ws):
     for q in range(3, 9):
         rhs[q] -= dt * jf[1, q]
     lim = 0.5 * math.pi
-    pen0 = alpha[0] - lim if alpha[0] > lim else (alpha[0] + lim if alpha[0] < -lim else 0.0)
-    pen1 = alpha[1] - lim if alpha[1] > lim else (alpha[1] + lim if alpha[1] < -lim else 0.0)
+    pen0 = a_l - lim if a_l > lim else (a_l + lim if a_l < -lim else 0.0)
+    pen1 = a_r - lim if a_r > lim else (a_r + lim if a_r < -lim else 0.0)
     for j, pen in ((0, pen0), (1, pen1)):
         if pen != 0.0:
             K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
@@ -335,7 +342,7 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, ws):
     return 0.5 * energy
 
 
-@njit(cache=True)
+@_jit
 def kinetic_energy(c, pos, vel, M):
     """Kinetic energy 0.5 v^T M(alpha) v of the plant, J."""
     _mass_matrix(c, pos[3:5], M)
@@ -346,7 +353,7 @@ def kinetic_energy(c, pos, vel, M):
     return 0.5 * e
 
 
-@njit(cache=True)
+@_jit
 def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
     """Plant driven by given motor torques (N, 4), held over each sample.
 
@@ -359,29 +366,29 @@ def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
     V = np.zeros((n + 1, 9))
     E = np.zeros(n + 1)
     W = np.zeros((n + 1, 3))
-    ws = workspace()
+    M, K, A, h, rhs, slip, dvec, jf, tr = workspace()
     work = np.zeros(3)
     dt = dt_sample / substeps
     P[0] = pos
     V[0] = vel
-    E[0] = kinetic_energy(c, pos, vel, ws[0])
+    E[0] = kinetic_energy(c, pos, vel, M)
     tq = np.zeros(4)
     mu_w = np.ones(4)
     for k in range(n):
         for i in range(4):
             tq[i] = min(max(torques[k, i], -c[_TLIM]), c[_TLIM])
         for j in range(substeps):
-            plant_step(c, pos, vel, tq, dt, work, mu_w, ws)
+            plant_step(c, pos, vel, tq, dt, work, mu_w, M, K, A, h, rhs, slip, dvec, jf, tr)
         P[k + 1] = pos
         V[k + 1] = vel
-        E[k + 1] = kinetic_energy(c, pos, vel, ws[0])
+        E[k + 1] = kinetic_energy(c, pos, vel, M)
         W[k + 1] = work
     return P, V, E, W
 
 
 # --- slip scenario (see slip.py) ---
 
-@njit(cache=True)
+@_jit_borrow
 def _contact_point(c, pos, i):
     """World position (X, Y) of the contact point of wheel i: steering axis plus a along the axle."""
     side, s, h, cx, cy = _unit_frame(c, i)
@@ -392,7 +399,7 @@ def _contact_point(c, pos, i):
     return pos[0] + cg * px - sg * py, pos[1] + sg * px + cg * py
 
 
-@njit(cache=True)
+@_jit_borrow
 def patch_factors(c, pos, t, patches, mu_w):
     """Factor on mu (4,) of each wheel at time t: the smallest ``mu_factor`` of the patches
     (rows x_min, x_max, y_min, y_max, t_start, t_end, mu_factor) holding its contact point, else 1."""
@@ -407,7 +414,7 @@ def patch_factors(c, pos, t, patches, mu_w):
                 mu_w[i] = min(mu_w[i], patches[p, 6])
 
 
-@njit(cache=True)
+@_jit
 def contact_points(c, positions):
     """World positions (N, 4, 2) of the contact points of the plant positions (N, 9)."""
     n = positions.shape[0]
@@ -418,7 +425,7 @@ def contact_points(c, positions):
     return out
 
 
-@njit(cache=True)
+@_jit
 def slip_speeds(c, positions, velocities):
     """Slip speed (N, 4), m/s, of each contact point: the norm of its lateral and longitudinal
     slip velocity (rows i and 4 + i of A(alpha) v with the true rolling radii)."""
@@ -428,7 +435,7 @@ def slip_speeds(c, positions, velocities):
     tr = np.zeros((4, 2))
     s = np.zeros(8)
     for k in range(n):
-        _unit_trig(positions[k, 3:5], tr)
+        _unit_trig(positions[k, 3], positions[k, 4], tr)
         _constraint_rows(c, tr, A)
         _slip_velocities(A, velocities[k], s)
         for i in range(4):
@@ -438,13 +445,13 @@ def slip_speeds(c, positions, velocities):
 
 # --- sensors (see sensors.py) ---
 
-@njit(cache=True)
+@_jit_borrow
 def quantize(x, resolution):
     """Reading of an incremental/absolute encoder: x rounded down to whole counts of ``resolution``."""
     return math.floor(x / resolution) * resolution
 
 
-@njit(cache=True)
+@_jit_borrow
 def read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m):
     """Measured steering angles (2,) and wheel angles (4,) of the plant positions ``pos`` at sample k.
 
@@ -460,7 +467,7 @@ def read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m):
 
 # --- controller (see controller.py) ---
 
-@njit(cache=True)
+@_jit_borrow
 def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, state, u):
     """Motor torque commands u (4,) at sample k from the measurements and the plan (in place)."""
     if state[12] == 0.0:
@@ -526,7 +533,7 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
 
 # --- closed loop ---
 
-@njit(cache=True)
+@_jit
 def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
               u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, steer_noise, torque_noise, torque_offset,
               t, burst, patches,
@@ -538,7 +545,7 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
     not know them, the torque sensors measure them); ``patches`` (P, 7) floor patches of reduced
     mu (see :func:`patch_factors`) at the sample times ``t`` (N,) plus the substep offsets.
     """
-    ws = workspace()
+    M, K, A, h, rhs, slip, dvec, jf, tr = workspace()
     alpha_m = np.zeros(2)
     beta_m = np.zeros(4)
     u = np.zeros(4)
@@ -566,6 +573,6 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
         for j in range(substeps):
             if n_patches > 0:
                 patch_factors(c, pos, t[k] + j * dt, patches, mu_w)
-            e = plant_step(c, pos, vel, ua, dt, work, mu_w, ws)
+            e = plant_step(c, pos, vel, ua, dt, work, mu_w, M, K, A, h, rhs, slip, dvec, jf, tr)
             if j == 0:  # the energy at the sample, from the step's M(alpha)
                 out_energy[k] = e
