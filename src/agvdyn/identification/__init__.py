@@ -14,7 +14,8 @@ Row pipeline (paper sec. 6-7), one module per stage, data flowing one way::
 The entry point is :func:`identify`.
 """
 from agvdyn.identification.equations import EquationBlock, equation_block, generalized_velocity
-from agvdyn.identification.pipeline import fit_blocks, identify, load_logs, platform_for
+from agvdyn.identification.fit import fit_blocks, fit_regression
+from agvdyn.identification.pipeline import identify, load_logs, platform_for
 from agvdyn.identification.plausibility import ImplausibleError, SignConventionError
 from agvdyn.identification.regression import (
     Dependency,
@@ -43,5 +44,5 @@ __all__ = [
     "Filtering", "IdentificationSettings", "EquationBlock", "UnidentifiableError", "ImplausibleError", "SignConventionError",
     "Dependency", "Estimator", "LeastSquares", "Identification", "SlipEvent", "RowCounts", "LogRows",
     "equation_block", "generalized_velocity", "log_equations", "log_rows", "row_modes", "stacked_system",
-    "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "load_logs", "platform_for",
+    "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "fit_regression", "load_logs", "platform_for",
 ]
