@@ -135,6 +135,19 @@ def test_a_long_log_in_pieces_gives_the_whole_logs_answer(long_log, monkeypatch)
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=0.05)
 
 
+def test_a_long_csv_log_streams_in_pieces_too(long_log, tmp_path, monkeypatch):
+    settings = IdentificationSettings(slip_threshold=math.inf)
+    log = read_log(long_log)
+    csv = write_log(tmp_path / "long.csv", log.frame, log.sidecar)
+    whole = identify(read_log(csv), settings=settings, keep_blocks=False)
+    monkeypatch.setattr(chunks, "CHUNK_ROWS", 7000)
+    assert chunks.is_long_log(csv, rows=100)
+    monkeypatch.setattr(chunks, "is_long_log", lambda path, rows=None: True)
+    chunked = identify(csv, settings=settings, keep_blocks=False)
+    assert chunked.n_samples == whole.n_samples
+    np.testing.assert_allclose(_vector(chunked), _vector(whole), rtol=1e-9)
+
+
 def test_bounded_on_one_segment_reports_what_it_cannot_identify(tmp_path):
     frame, _ = identification_frame({"steer_left": 10.0})
     log = Log.from_frame(frame)
