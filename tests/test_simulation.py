@@ -344,3 +344,27 @@ def test_feedforward_table_refuses_broken_limits():
     with pytest.raises(LimitError, match="speed limit"):
         feedforward_table(traj, P)
     assert len(feedforward_table(traj, P, limits=None)) == traj.n_samples
+
+
+def test_sparse_plant_terms_equal_the_dense_products():
+    """The plant step's sparse A(alpha), A v and K = M + dt A^T D A (lower triangle) against the
+    dense products at random states: A exactly equal to kinematics' constraint matrix (rolling
+    radii r), A v and K to rounding."""
+    from agvdyn.kinematics import constraint_matrix
+    from agvdyn.simulation._kernels import (_constraint_rows, _inertia_terms, _iteration_matrix,
+                                            _slip_velocities, _unit_trig)
+
+    c = plant_constants(G, P, replace(PlantSettings(), wheel_radius_error=(0.0,) * 4))
+    rng = np.random.default_rng(3)
+    tr, A, M, h, K, sv = np.zeros((4, 2)), np.zeros((8, 9)), np.zeros((9, 9)), np.zeros(9), np.zeros((9, 9)), np.zeros(8)
+    for _ in range(20):
+        alpha, v, d = rng.uniform(-1.57, 1.57, 2), rng.normal(size=9), rng.uniform(1e3, 1e6, 8)
+        _unit_trig(alpha[0], alpha[1], tr)
+        _constraint_rows(c, tr, A)
+        np.testing.assert_array_equal(A, constraint_matrix(G, alpha[None])[0])
+        _slip_velocities(A, v, sv)
+        np.testing.assert_allclose(sv, A @ v, rtol=1e-13, atol=1e-13)
+        _inertia_terms(c, tr, v, M, h)
+        _iteration_matrix(M, A, d, 5e-4, K)
+        dense = M + 5e-4 * A.T @ np.diag(d) @ A
+        np.testing.assert_allclose(np.tril(K), np.tril(dense), rtol=1e-12, atol=1e-9)

@@ -2,8 +2,15 @@
 
 They live in one module on purpose: numba's on-disk cache (``cache=True``) is invalidated only
 when the file of the cached function changes, not when a function it calls in another file
-does. Keeping every kernel in this file means an edit anywhere recompiles everything.
+does. Keeping every kernel in this file means an edit anywhere recompiles everything (hence
+the length of the file).
 The physics and the design choices are documented in plant.py, sensors.py and controller.py.
+
+Speed (issue 12): the whole closed loop runs in :func:`run_chunk`, no Python per sample; a plant
+step (about 0.6 us, four per sample) walks only the nonzero entries of A(alpha), M(alpha) and
+A^T D A in the order of the dense sums, so its results are those of the dense formulation bit
+for bit; it allocates nothing and takes its arrays without reference counting. What remains is
+mostly a chain of dependent operations (the 9 x 9 Cholesky solve alone is ~40 %).
 """
 from __future__ import annotations
 
@@ -20,8 +27,8 @@ _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
 #: Compiled and cached; a division by zero gives inf or nan (caught as divergence) instead of a
 #: Python exception, which spares a check at every division.
 _jit = njit(cache=True, error_model="numpy")
-#: The same for kernels that allocate nothing: without numba's runtime (NRT) they take their arrays
-#: without reference counting (about 30 atomic operations per plant step, ~9 % of the loop).
+#: The same for kernels that allocate nothing: without numba's runtime (private flag ``_nrt``)
+#: they take their arrays without reference counting (~30 atomic operations per plant step, ~9 %).
 _jit_borrow = njit(cache=True, error_model="numpy", _nrt=False)
 
 
@@ -51,12 +58,17 @@ def _unit_trig(alpha_l, alpha_r, tr):
 
 
 @_jit_borrow
-def _mass_matrix_trig(c, tr, M):
-    """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities) from the unit headings."""
+def _inertia_terms(c, tr, v, M, bias):
+    """Mass matrix M(alpha) (9, 9) and Coriolis and centrifugal forces h(alpha, v) (9,) of the
+    plant (body-frame velocities) from the unit headings ``tr``."""
     M[:, :] = 0.0
     M[0, 0] = c[_MB]
     M[1, 1] = c[_MB]
     M[2, 2] = c[_CB]
+    bias[:] = 0.0
+    w = v[2]
+    bias[0] = -c[_MB] * w * v[1]
+    bias[1] = c[_MB] * w * v[0]
     m_u, e = c[_MU_MASS], c[_EU]
     for i in range(4):
         side, s, h, cx, cy = _unit_frame(c, i)
@@ -77,6 +89,20 @@ def _mass_matrix_trig(c, tr, M):
         M[3 + side, 3 + side] += Ju
         M[2, 3 + side] += Ju * h
         M[3 + side, 2] += Ju * h
+        if m_u == 0.0:
+            continue
+        ad = v[3 + side]
+        # velocity of the unit's centre of mass (body components)
+        wx = v[0] - w * py + dpx * ad
+        wy = v[1] + w * px + dpy * ad
+        # J_dot v = omega z x p_dot + d2p/dalpha2 alpha_dot^2 ; d2p/dalpha2 = -s e (-sin, cos)
+        pdx, pdy = dpx * ad, dpy * ad
+        ax = -w * pdy + (s * e * st) * ad * ad - w * wy
+        ay = w * pdx + (-s * e * ct) * ad * ad + w * wx
+        bias[0] += m_u * ax
+        bias[1] += m_u * ay
+        bias[2] += m_u * (-py * ax + px * ay)
+        bias[3 + side] += m_u * (dpx * ax + dpy * ay)
     for i in range(4):
         M[5 + i, 5 + i] = c[_BW]
 
@@ -86,38 +112,7 @@ def _mass_matrix(c, alpha, M):
     """Mass matrix M(alpha) (9, 9) of the plant (body-frame velocities)."""
     tr = np.empty((4, 2))
     _unit_trig(alpha[0], alpha[1], tr)
-    _mass_matrix_trig(c, tr, M)
-
-
-@_jit_borrow
-def _bias_trig(c, tr, v, out):
-    """Coriolis and centrifugal forces h(alpha, v) (9,) from the unit headings."""
-    out[:] = 0.0
-    w = v[2]
-    out[0] = -c[_MB] * w * v[1]
-    out[1] = c[_MB] * w * v[0]
-    m_u, e = c[_MU_MASS], c[_EU]
-    if m_u == 0.0:
-        return
-    for i in range(4):
-        side, s, h, cx, cy = _unit_frame(c, i)
-        ct, st = tr[i, 0], tr[i, 1]
-        px = cx - s * e * st
-        py = cy + s * e * ct
-        dpx = -s * e * h * ct
-        dpy = -s * e * h * st
-        ad = v[3 + side]
-        # velocity of the unit's centre of mass (body components)
-        wx = v[0] - w * py + dpx * ad
-        wy = v[1] + w * px + dpy * ad
-        # J_dot v = omega z x p_dot + d2p/dalpha2 alpha_dot^2 ; d2p/dalpha2 = -s e (-sin, cos)
-        pdx, pdy = dpx * ad, dpy * ad
-        ax = -w * pdy + (s * e * st) * ad * ad - w * wy
-        ay = w * pdx + (-s * e * ct) * ad * ad + w * wx
-        out[0] += m_u * ax
-        out[1] += m_u * ay
-        out[2] += m_u * (-py * ax + px * ay)
-        out[3 + side] += m_u * (dpx * ax + dpy * ay)
+    _inertia_terms(c, tr, np.zeros(9), M, np.empty(9))
 
 
 @_jit
@@ -125,7 +120,7 @@ def _bias(c, alpha, v, out):
     """Coriolis and centrifugal forces h(alpha, v) (9,) of the plant in body-frame velocities."""
     tr = np.empty((4, 2))
     _unit_trig(alpha[0], alpha[1], tr)
-    _bias_trig(c, tr, v, out)
+    _inertia_terms(c, tr, v, np.empty((9, 9)), out)
 
 
 @_jit_borrow
@@ -265,8 +260,7 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
     """
     a_l, a_r = pos[3], pos[4]
     _unit_trig(a_l, a_r, tr)
-    _mass_matrix_trig(c, tr, M)
-    _bias_trig(c, tr, vel, h)
+    _inertia_terms(c, tr, vel, M, h)
     _constraint_rows(c, tr, A)
     energy = 0.0
     for p in range(5):
