@@ -383,14 +383,22 @@ def run_open_loop(c, pos0, vel0, torques, dt_sample, substeps):
 # --- slip scenario (see slip.py) ---
 
 @_jit_borrow
-def _contact_point(c, pos, i):
-    """World position (X, Y) of the contact point of wheel i: steering axis plus a along the axle."""
+def _contact_xy(c, pos, cg, sg, ct, st, i):
+    """World position (X, Y) of the contact point of wheel i, steering axis plus a along the axle,
+    from cos and sin of the heading (cg, sg) and of the wheel's heading h_i alpha_side (ct, st)."""
     side, s, h, cx, cy = _unit_frame(c, i)
-    th = h * pos[3 + side]
-    px = cx - s * c[_A] * math.sin(th)
-    py = cy + s * c[_A] * math.cos(th)
-    cg, sg = math.cos(pos[2]), math.sin(pos[2])
+    px = cx - s * c[_A] * st
+    py = cy + s * c[_A] * ct
     return pos[0] + cg * px - sg * py, pos[1] + sg * px + cg * py
+
+
+@_jit_borrow
+def _contact_xys(c, pos):
+    """World positions ((X, Y),) * 4 of the four contact points (three sine/cosine pairs)."""
+    cg, sg = math.cos(pos[2]), math.sin(pos[2])
+    cl, sl, cr, sr = math.cos(pos[3]), math.sin(pos[3]), math.cos(pos[4]), math.sin(pos[4])
+    return (_contact_xy(c, pos, cg, sg, cl, sl, 0), _contact_xy(c, pos, cg, sg, cl, -sl, 1),
+            _contact_xy(c, pos, cg, sg, cr, sr, 2), _contact_xy(c, pos, cg, sg, cr, -sr, 3))
 
 
 @_jit_borrow
@@ -400,10 +408,16 @@ def patch_factors(c, pos, t, patches, mu_w):
     for i in range(4):
         mu_w[i] = 1.0
     for p in range(patches.shape[0]):
+        if not (t < patches[p, 4] or t >= patches[p, 5]):
+            break
+    else:
+        return  # no patch at this time
+    xy = _contact_xys(c, pos)
+    for p in range(patches.shape[0]):
         if t < patches[p, 4] or t >= patches[p, 5]:
             continue
         for i in range(4):
-            x, y = _contact_point(c, pos, i)
+            x, y = xy[i]
             if patches[p, 0] <= x < patches[p, 1] and patches[p, 2] <= y < patches[p, 3]:
                 mu_w[i] = min(mu_w[i], patches[p, 6])
 
@@ -414,8 +428,9 @@ def contact_points(c, positions):
     n = positions.shape[0]
     out = np.zeros((n, 4, 2))
     for k in range(n):
+        xy = _contact_xys(c, positions[k])
         for i in range(4):
-            out[k, i, 0], out[k, i, 1] = _contact_point(c, positions[k], i)
+            out[k, i, 0], out[k, i, 1] = xy[i]
     return out
 
 
