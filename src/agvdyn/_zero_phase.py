@@ -11,8 +11,8 @@ __all__ = ["sosfiltfilt_columns"]
 
 
 @numba.njit(cache=True, fastmath=False)
-def _pass(sos, zi, ext, out, reverse):  # pragma: no cover - compiled
-    """One direction of the cascade over ``ext`` (m, c) into ``out``; state starts at zi * first sample."""
+def _pass(sos, zi, ext, reverse):  # pragma: no cover - compiled
+    """One direction of the cascade over ``ext`` (m, c), in place; state starts at zi * first sample."""
     m, c = ext.shape
     ns = sos.shape[0]
     z = np.empty((ns, 2, c))
@@ -37,7 +37,7 @@ def _pass(sos, zi, ext, out, reverse):  # pragma: no cover - compiled
                 z1[j] = b2 * x - a2 * y
                 cur[j] = y
         for j in range(c):
-            out[i, j] = cur[j]
+            ext[i, j] = cur[j]
 
 
 @numba.njit(cache=True)
@@ -50,10 +50,9 @@ def _filtfilt(sos, zi, x, padlen):  # pragma: no cover - compiled
             ext[k, j] = 2.0 * x[0, j] - x[padlen - k, j]
             ext[padlen + n + k, j] = 2.0 * x[n - 1, j] - x[n - 2 - k, j]
     ext[padlen:padlen + n] = x
-    fwd = np.empty((m, c))
-    _pass(sos, zi, ext, fwd, False)
-    _pass(sos, zi, fwd, ext, True)
-    return ext[padlen:padlen + n].copy()
+    _pass(sos, zi, ext, False)  # one buffer, filtered in place both ways: no page faults on fresh ones
+    _pass(sos, zi, ext, True)
+    return ext[padlen:padlen + n]
 
 
 def sosfiltfilt_columns(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, padlen: int) -> np.ndarray:
