@@ -64,6 +64,24 @@ def naive_rows(geometry, block_inputs, n_per_segment: int):
     return np.array(rows), np.array(rhs)
 
 
+def naive_inputs(log, settings) -> list:
+    """Per run of one mode: (mode, alpha, q_dot, q_ddot, torque) of the filtered stretches of a log."""
+    from agvdyn.identification.rows import row_modes  # noqa: PLC0415
+    from agvdyn.identification.stretches import filtered_stretch, stretch_bounds  # noqa: PLC0415
+    from agvdyn.kinematics import Mode  # noqa: PLC0415
+    from agvdyn.signals import runs  # noqa: PLC0415
+
+    inputs = []
+    for a, b in stretch_bounds(log.t, log.alpha, log.beta, settings)[0]:
+        st = filtered_stretch(PROTOTYPE, log, a, b, settings)
+        modes = row_modes(PROTOTYPE, st, settings)
+        q_ddot = np.concatenate([st.chassis_ddot, st.alpha_ddot, st.beta_ddot], axis=1)
+        for c, d in runs(modes):
+            if modes[c]:
+                inputs.append((Mode(int(modes[c])), st.alpha[c:d], st.q_dot[c:d], q_ddot[c:d], st.torque[c:d]))
+    return inputs
+
+
 def acceptance(seeds: list[int]) -> None:
     """Identification on simulated logs against the simulator's truth (Table 2)."""
     from agvdyn.io import Log  # noqa: PLC0415
@@ -130,19 +148,7 @@ def main() -> None:
     print(f"  largest relative parameter error on the noise-free model log: {err:.2e}")
 
     # same regression from the same filtered signals: vectorised vs per-sample
-    from agvdyn.identification.rows import row_modes  # noqa: PLC0415
-    from agvdyn.identification.stretches import filtered_stretch, stretch_bounds  # noqa: PLC0415
-    from agvdyn.kinematics import Mode  # noqa: PLC0415
-    from agvdyn.signals import runs  # noqa: PLC0415
-
-    inputs = []
-    for a, b in stretch_bounds(log.t, log.alpha, log.beta, settings)[0]:
-        st = filtered_stretch(PROTOTYPE, log, a, b, settings)
-        modes = row_modes(PROTOTYPE, st, settings)
-        q_ddot = np.concatenate([st.chassis_ddot, st.alpha_ddot, st.beta_ddot], axis=1)
-        for c, d in runs(modes):
-            if modes[c]:
-                inputs.append((Mode(int(modes[c])), st.alpha[c:d], st.q_dot[c:d], q_ddot[c:d], st.torque[c:d]))
+    inputs = naive_inputs(log, settings)
     t0 = time.perf_counter()
     vec_blocks = [equation_block(PROTOTYPE, m, a, qd, qdd, u, stiction_threshold=0.0) for m, a, qd, qdd, u in inputs]
     fit_blocks(vec_blocks, PROTOTYPE)

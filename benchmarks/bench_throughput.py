@@ -75,27 +75,13 @@ def _naive_rate(path: Path, n_per_segment: int = 1000) -> float:
     """Samples per second of rows of eq. (19) built one sample at a time in Python
     (``bench_identification.naive_rows``) from the filtered signals of the log."""
     sys.path.insert(0, str(Path(__file__).parent))
-    from bench_identification import naive_rows  # noqa: PLC0415
-
-    import numpy as np  # noqa: PLC0415
+    from bench_identification import naive_inputs, naive_rows  # noqa: PLC0415
 
     from agvdyn.identification import IdentificationSettings, load_logs  # noqa: PLC0415
-    from agvdyn.identification.rows import row_modes  # noqa: PLC0415
-    from agvdyn.identification.stretches import filtered_stretch, stretch_bounds  # noqa: PLC0415
-    from agvdyn.kinematics import Mode  # noqa: PLC0415
     from agvdyn.platform import PROTOTYPE  # noqa: PLC0415
-    from agvdyn.signals import runs  # noqa: PLC0415
 
-    settings = IdentificationSettings()
     (log,) = load_logs([path])
-    inputs = []
-    for a, b in stretch_bounds(log.t, log.alpha, log.beta, settings)[0]:
-        st = filtered_stretch(PROTOTYPE, log, a, b, settings)
-        modes = row_modes(PROTOTYPE, st, settings)
-        q_ddot = np.concatenate([st.chassis_ddot, st.alpha_ddot, st.beta_ddot], axis=1)
-        for c, d in runs(modes):
-            if modes[c]:
-                inputs.append((Mode(int(modes[c])), st.alpha[c:d], st.q_dot[c:d], q_ddot[c:d], st.torque[c:d]))
+    inputs = naive_inputs(log, IdentificationSettings())
     t0 = time.perf_counter()
     naive_rows(PROTOTYPE, inputs, n_per_segment)
     seconds = time.perf_counter() - t0
