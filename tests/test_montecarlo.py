@@ -24,6 +24,7 @@ def test_cli_writes_the_table_and_prints_the_summary(tmp_path):
     summary = summarize(table)
     assert summary.loc[("ols", "hac", "m_ch"), "runs"] == 2
     assert 0.0 <= summary["coverage"].min() <= summary["coverage"].max() <= 1.0
+    assert (summary["coverage_low"] <= summary["coverage"]).all() and (summary["coverage"] <= summary["coverage_high"]).all()
 
 
 def test_a_failed_identification_is_a_row_with_its_error():

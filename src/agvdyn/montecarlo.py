@@ -124,13 +124,17 @@ def run_study(cases: Sequence[StudyCase], *, workers: int = 1,
 
 def summarize(table: pd.DataFrame) -> pd.DataFrame:
     """Per estimator, uncertainty method and parameter: runs, failures, bias, RMSE, mean std,
-    RMSE / mean std, 95 % coverage (share of runs whose interval holds the truth), mean seconds."""
+    RMSE / mean std, 95 % coverage (share of runs whose interval holds the truth) with its Wilson
+    95 % interval (``coverage_low``, ``coverage_high``: what the number of runs can tell), mean seconds."""
+    from scipy.stats import binomtest
+
     def one(g: pd.DataFrame) -> pd.Series:
         ok = g[g["error"] == ""]
         err = ok["value"] - ok["truth"]
         rmse = float(np.sqrt(np.mean(err**2))) if len(ok) else math.nan
         mean_std = float(ok["std"].mean()) if len(ok) else math.nan
         covered = (ok["ci_low"] <= ok["truth"]) & (ok["truth"] <= ok["ci_high"])
+        band = binomtest(int(covered.sum()), len(ok)).proportion_ci(method="wilson") if len(ok) else None
         return pd.Series({
             "runs": len(g), "failed": int((g["error"] != "").sum()),
             "bias_pct": 100 * float(err.mean() / ok["truth"].mean()) if len(ok) else math.nan,
@@ -138,6 +142,7 @@ def summarize(table: pd.DataFrame) -> pd.DataFrame:
             "mean_std_pct": 100 * mean_std / float(ok["truth"].abs().mean()) if len(ok) else math.nan,
             "rmse_over_std": rmse / mean_std if mean_std > 0 else math.nan,
             "coverage": float(covered.mean()) if len(ok) else math.nan,
+            "coverage_low": band.low if band else math.nan, "coverage_high": band.high if band else math.nan,
             "seconds": float(g["seconds"].mean()),
         })
 

@@ -79,12 +79,15 @@ def montecarlo(
     summary = summarize(table)
     view = Table(title=f"{runs} runs of {experiment}{' (ideal plant)' if ideal_plant else ''}: error and reported "
                        "uncertainty against the simulated truth")
-    for col in ("estimator", "uncertainty", "parameter", "bias %", "RMSE %", "mean std %", "RMSE/std", "coverage 95",
+    for col in ("estimator", "uncertainty", "parameter", "bias %", "RMSE %", "mean std %", "RMSE/std",
+                "coverage 95 (Wilson 95 %)",
                 "failed", "s/run"):
         view.add_column(col, justify="left" if col in ("estimator", "uncertainty", "parameter") else "right")
     for (est, unc, name), row in summary.iterrows():
         view.add_row(est, unc, name, f"{row.bias_pct:+.3f}", f"{row.rmse_pct:.3f}", f"{row.mean_std_pct:.3f}",
-                     f"{row.rmse_over_std:.2f}", f"{100 * row.coverage:.0f} %", f"{int(row.failed)}",
+                     f"{row.rmse_over_std:.2f}",
+                     f"{100 * row.coverage:.0f} % ({100 * row.coverage_low:.0f}-{100 * row.coverage_high:.0f})",
+                     f"{int(row.failed)}",
                      f"{row.seconds:.2f}")
     Console().print(view)
     typer.echo(f"wrote {out} ({len(table):,} rows)")
