@@ -268,7 +268,8 @@ def detect_mode(geom: Geometry, alpha, tolerance: float = MODE_TOLERANCE) -> np.
     car = (np.abs(icr[:, 1]) <= tolerance) & (np.abs(icr[:, 0]) <= max_virtual_angle(geom) + tolerance)
     mode[car] = Mode.CAR_LIKE
     for m in (Mode.STRAIGHT, Mode.ROTATION, Mode.LATERAL):
-        near = np.all(np.abs(alpha - nominal_steering(geom, m)) <= tolerance, axis=1)
+        nominal = nominal_steering(geom, m)
+        near = (np.abs(alpha[:, 0] - nominal[0]) <= tolerance) & (np.abs(alpha[:, 1] - nominal[1]) <= tolerance)
         mode[near] = m
     return mode
 

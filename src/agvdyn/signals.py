@@ -36,6 +36,7 @@ __all__ = [
     "filtered_derivatives",
     "parallel_filter",
     "runs",
+    "row_max_abs",
     "stiction_mask",
     "guarded_mask",
     "SEGMENT_MODES",
@@ -176,6 +177,16 @@ def filtered_derivatives(x: np.ndarray, dt: float, settings: FilterSettings = Fi
     xd = time_derivative(xf, dt, axis=axis, scheme=settings.derivative)
     xdd = time_derivative(xd, dt, axis=axis, scheme=settings.derivative)
     return xf, xd, xdd
+
+
+def row_max_abs(x: np.ndarray) -> np.ndarray:
+    """``max_j |x[:, j]|`` per row ``(N,)``, column by column (numpy's ``max(axis=1)`` over a few
+    columns is ~15x slower: it reduces each short row on its own)."""
+    x = np.asarray(x, dtype=float)
+    out = np.abs(x[:, 0])
+    for j in range(1, x.shape[1]):
+        np.maximum(out, np.abs(x[:, j]), out=out)
+    return out
 
 
 def runs(labels: np.ndarray) -> list[tuple[int, int]]:

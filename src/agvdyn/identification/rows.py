@@ -29,7 +29,7 @@ from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
 from agvdyn.kinematics import Mode, detect_mode, icr_residual, kinematic_model
 from agvdyn.platform import Geometry
-from agvdyn.signals import guarded_mask, runs
+from agvdyn.signals import guarded_mask, row_max_abs, runs
 
 __all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations", "labels_present"]
 
@@ -92,8 +92,8 @@ def row_modes(geometry: Geometry, st: Stretch, settings: IdentificationSettings)
     config = detect_mode(geometry, st.alpha, settings.mode_tolerance).astype(np.int8)
     H1 = kinematic_model(geometry, Mode.PARKING, st.alpha[:1])[0]
     rolling = st.beta_dot - st.alpha_dot @ H1[5:].T  # wheel rates not explained by steering at rest
-    rest = np.max(np.abs(rolling), axis=1) * geometry.r < settings.rest_speed
-    steering = np.max(np.abs(st.alpha_dot), axis=1) > settings.steering_rest_rate
+    rest = row_max_abs(rolling) * geometry.r < settings.rest_speed
+    steering = row_max_abs(st.alpha_dot) > settings.steering_rest_rate
     mode = config.copy()
     mode[rest & steering] = int(Mode.PARKING)
     moving = ~rest
@@ -212,7 +212,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         modes[a:b] = row_modes(geometry, st, settings)
     counts.stretches = len(stretches)
     in_mode = [(st, modes[st.rows]) for st in stretches]
-    speeds = np.concatenate([st.slip.max(axis=1)[(m != NO_MODE) & ~st.edge] for st, m in in_mode] or [np.zeros(0)])
+    speeds = np.concatenate([row_max_abs(st.slip)[(m != NO_MODE) & ~st.edge] for st, m in in_mode] or [np.zeros(0)])
     threshold = slip_threshold(speeds, settings)
     slip_guard = settings.slip_guard
     blocks, events = [], []

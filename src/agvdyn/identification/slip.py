@@ -15,7 +15,7 @@ import numpy as np
 
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.platform import WHEELS
-from agvdyn.signals import runs
+from agvdyn.signals import row_max_abs, runs
 
 __all__ = ["SlipEvent", "slip_threshold", "slip_rows"]
 
@@ -62,7 +62,7 @@ def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, gu
     """
     n = t.size
     over = slip > threshold
-    hit = over.any(axis=1)
+    hit = row_max_abs(slip) > threshold
     if not hit.any():
         return np.zeros(n, dtype=bool), []
     cs = np.concatenate([[0], np.cumsum(hit)])

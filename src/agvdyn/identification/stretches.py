@@ -20,7 +20,7 @@ from agvdyn.dynamics import regressor_signals
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.odometry import odometry_with_slip
 from agvdyn.platform import Geometry
-from agvdyn.signals import filtered_derivatives, lowpass, time_derivative, uniform_sample_time
+from agvdyn.signals import filtered_derivatives, lowpass, row_max_abs, time_derivative, uniform_sample_time
 
 __all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
            "torque_lead", "align_torque"]
@@ -112,8 +112,8 @@ def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings:
         return [(0, t.size)], []
     nominal = float(np.median(steps))
     gap = steps > settings.stretch_gap * nominal
-    steer = np.max(np.abs(np.diff(alpha, axis=0)), axis=1) > settings.steering_jump_rate * nominal
-    wheel = np.max(np.abs(np.diff(beta, axis=0)), axis=1) > settings.wheel_jump_rate * nominal
+    steer = row_max_abs(np.diff(alpha, axis=0)) > settings.steering_jump_rate * nominal
+    wheel = row_max_abs(np.diff(beta, axis=0)) > settings.wheel_jump_rate * nominal
     cuts = np.flatnonzero(gap | steer | wheel)
     reasons = []
     for i in cuts:
