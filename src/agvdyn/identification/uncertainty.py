@@ -70,16 +70,28 @@ def _recording_weights(est: Estimator, data: RegressionData) -> Iterator[tuple[R
         start += m
 
 
-def _step_scores(est: Estimator, data: RegressionData) -> Iterator[np.ndarray]:
+def _step_scores(est: Estimator, data: RegressionData, max_steps: int | None = None) -> Iterator[np.ndarray]:
     """Scores ``a_i w_i r_i`` summed per time step, one dense (T_rec, p) array per recording (missing
-    steps zero); computed one recording at a time."""
+    steps zero; only the first ``max_steps`` steps when given); one recording at a time."""
     coef = est.coef_
     for rec, w in _recording_weights(est, data):
         idx = rec.step - int(rec.step.min())
-        scores = rec.A * (w * (rec.y - rec.A @ coef))[:, None]
+        if max_steps is not None and idx.max() >= max_steps:
+            keep = idx < max_steps
+            idx, A, y, w, group = idx[keep], rec.A[keep], rec.y[keep], w[keep], rec.group[keep]
+        else:
+            A, y, group = rec.A, rec.y, rec.group
+        scores = A * (w * (y - A @ coef))[:, None]
         T, p = int(idx.max()) + 1, scores.shape[1]
-        flat = (idx[:, None] * p + np.arange(p)).ravel()
-        yield np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
+        groups = [group == g for g in np.unique(group)]
+        if all(np.all(np.diff(idx[sel]) > 0) for sel in groups):  # one row per coordinate and step (our stores)
+            dense = np.zeros((T, p))
+            for sel in groups:
+                dense[idx[sel]] += scores[sel]
+        else:  # repeated steps within a coordinate: summed by one bincount
+            flat = (idx[:, None] * p + np.arange(p)).ravel()
+            dense = np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
+        yield dense
 
 
 def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 15) -> np.ndarray:
@@ -176,7 +188,7 @@ def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data:
     if method is UncertaintyMethod.CLASSIC:
         return Uncertainty(method, est.cov_, {"sigma2": float(est.sigma2_)})
     lengths = [int(rec.step.max() - rec.step.min()) + 1 for rec in data.store]
-    tau = correlation_time(_step_scores(est, data))
+    tau = correlation_time(_step_scores(est, data, max_steps=1 << 15))
     L = int(bandwidth) if bandwidth is not None else int(min(max(min_bandwidth, math.ceil(bandwidth_factor * tau.max())),
                                                               max(1, max(lengths) // 4)))
     details: dict[str, Any] = {"bandwidth_steps": L, "correlation_time_steps": float(tau.max()),
