@@ -89,5 +89,8 @@ def montecarlo(
                      f"{100 * row.coverage:.0f} % ({100 * row.coverage_low:.0f}-{100 * row.coverage_high:.0f})",
                      f"{int(row.failed)}",
                      f"{row.seconds:.2f}")
-    Console().print(view)
+    console = Console()
+    if not console.is_terminal:  # piped or logged: the whole table, not wrapped to 80 columns
+        console = Console(width=132)
+    console.print(view)
     typer.echo(f"wrote {out} ({len(table):,} rows)")
