@@ -13,7 +13,8 @@ from rich.table import Table
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
 
-_EXPERIMENT_HELP = "identification, lane-change, lateral, or a trajectory file (.csv / .yaml, see docs/simulation.md)."
+_EXPERIMENT_HELP = ("identification, lane-change, lateral, lifted-wheel, car-like, or a trajectory file (.csv / .yaml, "
+                    "see docs/simulation.md).")
 
 
 def _parameter_file(path: Path) -> "ParameterFile":  # noqa: F821

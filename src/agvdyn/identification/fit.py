@@ -118,12 +118,9 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     inflation = variance_inflation(A1)
     collinear = [Dependency(n, (), math.nan, inflation=float(v)) for n, v in zip(free, inflation)
                  if v > settings.max_inflation and n in PARAMETER_NAMES]
-    if collinear and not report:
-        raise UnidentifiableError(collinear, f"poorly conditioned data (variance inflation above "
-                                             f"{settings.max_inflation:g}): ")
-    warnings += [f"poorly conditioned: {d.describe()}" for d in collinear]
     pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
     est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
+    warnings += _collinear_warnings(collinear, data, est.coef_, free, settings.max_inflation, refuse=not report)
     if data.pseudo and data.store is not None:  # eq. (25)'s sigma^2 from the rows themselves
         weights = np.ones(len(data.group_names))
         weights[data.group] = est.weights_
@@ -188,6 +185,63 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         offsets_std={n: all_std[n] for n in OFFSET_NAMES if n in all_std},
         rows=rows if rows is not None else RowCounts(), slip_events=tuple(slip_events),
         slip_thresholds=dict(slip_thresholds or {}), warnings=tuple(warnings))
+
+
+#: A parameter whose column is nearly a combination of the others (variance inflation above
+#: ``max_inflation``) is still identified when the data carry enough information on it: its std
+#: predicted from the regressor with the planner's noise level of each coordinate (or the residual
+#: RMS where larger) at most this share of its value. Car-like turns next to fast rotation
+#: determine B_w so (``agvdyn simulate car-like``, docs/planning.md); noise-free data do not pass
+#: for determined, their predicted std uses the nominal noise.
+COLLINEAR_RELATIVE_STD = 0.1
+
+
+def predicted_relative_std(data: RegressionData, coef: np.ndarray, names: Sequence[str]) -> dict[str, float]:
+    """Std of each free parameter relative to ``coef`` predicted from the information of the rows:
+    per coordinate the larger of the planner's noise level (:class:`NoiseLevels`, effective 2 ms
+    row noise with the HAC inflation of the simulator) and the residual RMS (inf where singular)."""
+    from agvdyn.trajectories.planner.settings import NoiseLevels
+
+    nominal = NoiseLevels()
+    measured: dict[str, float] = {}
+    for key, rms in data.residual_rms(coef).items():
+        coord = key.rsplit(":", 1)[-1]
+        measured[coord] = max(measured.get(coord, 0.0), rms)
+    info = np.zeros((len(names), len(names)))
+    for g, coord in enumerate(data.group_names):
+        rows = data.A[data.group == g]
+        level = max(getattr(nominal, coord, 0.0), measured.get(coord, 0.0))
+        if rows.size and level > 0:
+            info += rows.T @ rows / level**2
+    try:
+        std = np.sqrt(np.maximum(np.diag(np.linalg.inv(info)), 0.0))
+    except np.linalg.LinAlgError:
+        std = np.full(len(names), math.inf)
+    with np.errstate(divide="ignore"):
+        return {n: float(s / abs(v)) if v else math.inf for n, s, v in zip(names, std, coef)}
+
+
+def _collinear_warnings(collinear: Sequence[Dependency], data: RegressionData, coef: np.ndarray,
+                        free: Sequence[str], max_inflation: float, *, refuse: bool) -> list[str]:
+    """Warnings on the poorly conditioned parameters; with ``refuse``, :class:`UnidentifiableError`
+    naming them when any of them has a predicted std above ``COLLINEAR_RELATIVE_STD`` of its value
+    (those with their predicted std, the others of the group with their variance inflation)."""
+    if not collinear:
+        return []
+    rel = predicted_relative_std(data, coef, free)
+    weak = {d.name for d in collinear if not rel[d.name] <= COLLINEAR_RELATIVE_STD}
+    if weak and refuse:
+        named = [Dependency(d.name, (), math.nan, inflation=d.inflation,
+                            relative_std=rel[d.name] if d.name in weak else math.nan) for d in collinear]
+        hint = ("; B_w needs fast rotation and tight car-like turns with large yaw accelerations next to the "
+                "identification sequence, agvdyn simulate car-like" if "B_w" in weak else "")
+        raise UnidentifiableError(named, f"poorly conditioned data (variance inflation above {max_inflation:g} "
+                                         f"and a predicted standard deviation above "
+                                         f"{100 * COLLINEAR_RELATIVE_STD:g} % of the value{hint}): ")
+    return [f"poorly conditioned: {d.describe()}"
+            + ("" if d.name in weak else f"; determined by the data: predicted std {100 * rel[d.name]:.2g} % of "
+               "its value, sensitive to model errors")
+            for d in collinear]
 
 
 def _unexcited(missing: Sequence[Dependency], free: Sequence[str], est: Estimator

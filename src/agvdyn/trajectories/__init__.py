@@ -9,7 +9,8 @@ One module per job, data flowing one way::
     segments     Segment, Trajectory, alignment at rest, Fourier segments
     limits       Limits, limit_report, check_limits, FloorSpace, floor_space
     experiments  default excitation, identification sequence, lane change, lateral, lifted wheel,
-                 car-like excitation, experiment(name)
+                 experiment(name)
+    car_like     the car-like experiment: fast rotation and tight turns for B_w (identify --fix none)
     files        read_trajectory (CSV / YAML), write_trajectory (YAML)
     planner      plan(): optimal four-phase identification sequence in a floor rectangle
 
@@ -40,6 +41,7 @@ from agvdyn.trajectories.experiments import (
     lateral_experiment,
     lifted_wheel_experiment,
 )
+from agvdyn.trajectories.car_like import car_like_experiment
 from agvdyn.trajectories.files import read_trajectory
 
 __all__ = [
@@ -47,5 +49,5 @@ __all__ = [
     "Trajectory", "alignment", "fourier_segment", "pose_from_velocities", "FloorSpace", "LimitReport", "Limits",
     "check_limits", "floor_space", "limit_report", "default_excitation", "default_periods", "experiment",
     "identification_sequence", "lane_change", "lateral_experiment", "lifted_wheel_experiment", "EXPERIMENTS",
-    "read_trajectory",
+    "car_like_experiment", "read_trajectory",
 ]

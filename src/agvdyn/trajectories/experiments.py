@@ -1,6 +1,7 @@
 """Built-in experiments: the identification sequence of sec. 6.2 with its default excitation, the
 lane change of sec. 7 (validation), the lateral experiment, the lifted-wheel (single-axis) test of
-sec. 7, and :func:`experiment` by name."""
+sec. 7, the car-like experiment for B_w on the floor (:mod:`agvdyn.trajectories.car_like`), and
+:func:`experiment` by name."""
 from __future__ import annotations
 
 import math
@@ -27,7 +28,7 @@ __all__ = ["default_excitation", "default_periods", "identification_sequence", "
            "lifted_wheel_experiment", "experiment", "EXPERIMENTS"]
 
 #: Names of the built-in experiments of :func:`experiment`.
-EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel")
+EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel", "car-like")
 
 
 # Steering: 6 harmonics of 8 s (0.8-4.7 rad/s), three periods, so that C_l alpha_ddot is not
@@ -229,8 +230,8 @@ def lifted_wheel_experiment(geom: Geometry = PROTOTYPE, *, duration: float = 24.
 
 
 def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME) -> Trajectory:
-    """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``, ``lifted-wheel``)
-    or a trajectory file."""
+    """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``, ``lifted-wheel``,
+    ``car-like``) or a trajectory file."""
     key = name.strip().lower().replace("_", "-")
     if key == "identification":
         return identification_sequence(geom, dt=dt)
@@ -240,6 +241,10 @@ def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME
         return lateral_experiment(geom, dt=dt)
     if key == "lifted-wheel":
         return lifted_wheel_experiment(geom, dt=dt)
+    if key == "car-like":
+        from agvdyn.trajectories.car_like import car_like_experiment
+
+        return car_like_experiment(geom, dt=dt)
     if Path(name).suffix.lower() in (".csv", ".yaml", ".yml"):
         from agvdyn.trajectories.files import read_trajectory
 
