@@ -1,57 +1,86 @@
 """Compiled forward-backward filtering of many channels at once: the same result as
 ``scipy.signal.sosfiltfilt(sos, x, axis=0)`` (odd extension of ``padlen`` samples, initial states
 from ``sosfilt_zi`` scaled by the first sample of each pass), with every channel of a sample
-updated in one inner loop over contiguous memory instead of one scipy pass per channel."""
+updated in one inner loop over contiguous memory instead of one scipy pass per channel.
+
+:func:`filtfilt_in_place` filters a padded buffer whose middle rows a caller has already filled
+(no copy in or out); the kernels release the GIL, so recordings can be filtered in threads.
+"""
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-__all__ = ["sosfiltfilt_columns"]
+__all__ = ["sosfiltfilt_columns", "filtfilt_in_place", "padded_buffer"]
 
 
-@numba.njit(cache=True, fastmath=False)
+@numba.njit(cache=True, nogil=True, fastmath=False)
 def _pass(sos, zi, ext, reverse):  # pragma: no cover - compiled
     """One direction of the cascade over ``ext`` (m, c), in place; state starts at zi * first sample."""
     m, c = ext.shape
     ns = sos.shape[0]
-    z = np.empty((ns, 2, c))
+    z0 = np.empty((ns, c))
+    z1 = np.empty((ns, c))
     first = m - 1 if reverse else 0
     for s in range(ns):
         for j in range(c):
-            z[s, 0, j] = zi[s, 0] * ext[first, j]
-            z[s, 1, j] = zi[s, 1] * ext[first, j]
-    cur = np.empty(c)
+            z0[s, j] = zi[s, 0] * ext[first, j]
+            z1[s, j] = zi[s, 1] * ext[first, j]
     for k in range(m):
         i = m - 1 - k if reverse else k
-        for j in range(c):
-            cur[j] = ext[i, j]
+        row = ext[i]
         for s in range(ns):
             b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-            z0 = z[s, 0]
-            z1 = z[s, 1]
             for j in range(c):
-                x = cur[j]
-                y = b0 * x + z0[j]
-                z0[j] = b1 * x - a1 * y + z1[j]
-                z1[j] = b2 * x - a2 * y
-                cur[j] = y
+                x = row[j]
+                y = b0 * x + z0[s, j]
+                z0[s, j] = b1 * x - a1 * y + z1[s, j]
+                z1[s, j] = b2 * x - a2 * y
+                row[j] = y
+
+
+@numba.njit(cache=True, nogil=True)
+def _odd_extension(ext, n, padlen):  # pragma: no cover - compiled
+    """Rows ``[0, padlen)`` and ``[padlen + n, n + 2 padlen)`` of ``ext`` from its middle rows, as
+    scipy.signal's ``odd_ext``."""
+    c = ext.shape[1]
+    for k in range(padlen):
         for j in range(c):
-            ext[i, j] = cur[j]
+            ext[k, j] = 2.0 * ext[padlen, j] - ext[2 * padlen - k, j]
+            ext[padlen + n + k, j] = 2.0 * ext[padlen + n - 1, j] - ext[padlen + n - 2 - k, j]
 
 
-@numba.njit(cache=True)
-def _filtfilt(sos, zi, x, padlen):  # pragma: no cover - compiled
-    n, c = x.shape
-    m = n + 2 * padlen
-    ext = np.empty((m, c))
-    for j in range(c):
-        for k in range(padlen):  # odd extension, as scipy.signal's odd_ext
-            ext[k, j] = 2.0 * x[0, j] - x[padlen - k, j]
-            ext[padlen + n + k, j] = 2.0 * x[n - 1, j] - x[n - 2 - k, j]
-    ext[padlen:padlen + n] = x
+@numba.njit(cache=True, nogil=True)
+def _filtfilt_ext(sos, zi, ext, padlen):  # pragma: no cover - compiled
+    n = ext.shape[0] - 2 * padlen
+    _odd_extension(ext, n, padlen)
     _pass(sos, zi, ext, False)  # one buffer, filtered in place both ways: no page faults on fresh ones
     _pass(sos, zi, ext, True)
+
+
+@numba.njit(cache=True, nogil=True)
+def _filtfilt(sos, zi, x, padlen):  # pragma: no cover - compiled
+    n, c = x.shape
+    ext = np.empty((n + 2 * padlen, c))
+    ext[padlen:padlen + n] = x
+    _filtfilt_ext(sos, zi, ext, padlen)
+    return ext[padlen:padlen + n]
+
+
+def padded_buffer(n: int, channels: int, padlen: int) -> np.ndarray:
+    """An empty (n + 2 padlen, channels) buffer for :func:`filtfilt_in_place`; the signal goes in
+    rows ``padlen .. padlen + n``."""
+    return np.empty((n + 2 * padlen, channels))
+
+
+def filtfilt_in_place(sos: np.ndarray, zi: np.ndarray, ext: np.ndarray, padlen: int) -> np.ndarray:
+    """Zero-phase filtering of the signal in the middle rows of ``ext`` (see :func:`padded_buffer`),
+    in place; returns the view of the filtered signal (n, channels)."""
+    n = ext.shape[0] - 2 * padlen
+    if ext.ndim != 2 or not ext.flags.c_contiguous or n <= padlen:
+        raise ValueError(f"buffer of shape {ext.shape}: expected a C-contiguous (n + 2 padlen, channels) array "
+                         f"with n > padlen = {padlen}")
+    _filtfilt_ext(np.ascontiguousarray(sos, dtype=float), np.ascontiguousarray(zi, dtype=float), ext, int(padlen))
     return ext[padlen:padlen + n]
 
 

@@ -203,15 +203,20 @@ def _check_virtual(geom: Geometry, alpha_v) -> np.ndarray:
     return av
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
+def icr_state_trig(k, sin_l, cos_l, sin_r, cos_r):  # pragma: no cover - compiled
+    """:func:`icr_state` from the sines and cosines of the steering angles (computed once by callers
+    that need them for the constraints too)."""
+    av_l = np.arctan2(sin_l, cos_l + k * sin_l)
+    av_r = np.arctan2(sin_r, cos_r - k * sin_r)
+    return 0.5 * (av_l + av_r), (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
+
+
+@numba.njit(cache=True, nogil=True)
 def icr_state(k, alpha_l, alpha_r):  # pragma: no cover - compiled
     """(alpha_v, residual) of one configuration, ``k = b/l``: inverse of eq. (8) per side, their
     mean, and the ICR residual of eq. (9) (difference of the two sides' values modulo pi)."""
-    sl, cl = np.sin(alpha_l), np.cos(alpha_l)
-    sr, cr = np.sin(alpha_r), np.cos(alpha_r)
-    av_l = np.arctan2(sl, cl + k * sl)
-    av_r = np.arctan2(sr, cr - k * sr)
-    return 0.5 * (av_l + av_r), (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
+    return icr_state_trig(k, np.sin(alpha_l), np.cos(alpha_l), np.sin(alpha_r), np.cos(alpha_r))
 
 
 @numba.njit(cache=True)
@@ -323,7 +328,7 @@ def _constant_model(geom: Geometry, mode: Mode) -> np.ndarray:
     return _column(geom, theta, np.array([twist]), np.zeros((1, 2))).T
 
 
-@numba.njit(cache=True, fastmath=False)
+@numba.njit(cache=True, nogil=True, fastmath=False)
 def car_like_model_into(l, b, a, r, alpha_v, H, dH):  # pragma: no cover - compiled
     """H_2 and dH_2/d alpha_v ``(9, 2)`` at one virtual angle, written into ``H`` and ``dH`` (eq. 8, 11).
 

@@ -43,6 +43,7 @@ __all__ = [
     "IDENTIFICATION_SEGMENTS",
     "modes_from_segments",
     "uniform_sample_time",
+    "filter_design",
 ]
 
 
@@ -100,6 +101,20 @@ def _design(order: int, normalized_cutoff: float) -> tuple[np.ndarray, np.ndarra
     """Sections and ``sosfilt_zi`` of a Butterworth low-pass, designed once per order and cut-off."""
     sos = _signal.butter(order, normalized_cutoff, btype="low", output="sos")
     return sos, _signal.sosfilt_zi(sos)
+
+
+def filter_design(dt: float, settings: FilterSettings = FilterSettings()) -> tuple[np.ndarray, np.ndarray, int]:
+    """Sections, ``sosfilt_zi`` and padding (samples per end) of the zero-phase filter for sample
+    time ``dt``, designed once per order, cut-off and sample time (read only)."""
+    settings.sos(dt)  # checks the cut-off against the Nyquist frequency
+    sos, zi = _design(settings.order, settings.cutoff / (math.pi / dt))
+    return sos, zi, _padlen(settings.order, settings.cutoff / (math.pi / dt))
+
+
+@functools.lru_cache(maxsize=64)
+def _padlen(order: int, normalized_cutoff: float) -> int:
+    sos = _design(order, normalized_cutoff)[0]
+    return 3 * (2 * len(sos) + 1 - min((sos[:, 2] == 0).sum(), (sos[:, 5] == 0).sum()))
 
 
 def uniform_sample_time(t: np.ndarray, *, rtol: float = 1e-3, source: str = "t") -> float:

@@ -25,7 +25,11 @@ import numpy as np
 
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import triangular_factor
+from agvdyn.identification._kernels import kept_rows
 from agvdyn.identification.equations import EquationBlock
+
+#: Rows per QR of a tall-skinny factorization (fits the caches; fewer calls than more rows).
+_QR_ROWS = 2048
 
 __all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "row_statistics", "regression_data",
            "stacked_regression_data"]
@@ -57,50 +61,73 @@ class RecordingRows:
 
 class RowStore:
     """Rows per continuous recording; past ``budget`` bytes in memory they go to a temporary folder
-    (removed with the store). Iterating yields :class:`RecordingRows` in the order added."""
+    (removed with the store). Iterating yields :class:`RecordingRows` in the order added.
+
+    :meth:`add_packed` takes rows as they come from :func:`row_statistics`, one ``[A | y]`` block
+    (views are kept as they are: no copy; a spilled block is written as one plain array)."""
 
     def __init__(self, budget: int = 64 << 20) -> None:
         self.budget = budget
-        self._items: list[RecordingRows | Path] = []
+        self._items: list[RecordingRows | _Packed | tuple[Path, Path]] = []
         self._bytes = 0
         self._folder: Path | None = None
         self._cleanup: weakref.finalize | None = None
 
     def add(self, rows: RecordingRows) -> None:
-        size = sum(x.nbytes for x in (rows.A, rows.y, rows.group, rows.step, rows.key) if x is not None)
+        self.add_packed(np.column_stack([rows.A, rows.y]), rows.group, rows.step, rows.key)
+
+    def add_packed(self, rows: np.ndarray, group: np.ndarray, step: np.ndarray, key: np.ndarray | None) -> None:
+        """Rows ``[A | y]`` (m, w + 1) of one recording with their coordinate codes, steps and keys."""
+        size = sum(x.nbytes for x in (rows, group, step, key) if x is not None)
         if self._bytes + size <= self.budget:
-            self._items.append(rows)
+            self._items.append(_Packed(rows, group, step, key))
             self._bytes += size
             return
         if self._folder is None:
             self._folder = Path(tempfile.mkdtemp(prefix="agvdyn-rows-"))
             self._cleanup = weakref.finalize(self, shutil.rmtree, self._folder, True)
-        path = self._folder / f"{len(self._items)}.npy"  # one plain array: no zip on the way back
-        key = np.full(rows.y.size, -1) if rows.key is None else rows.key
-        np.save(path, np.column_stack([rows.A, rows.y, rows.group, rows.step, key]))
-        self._items.append(path)
+        base = self._folder / str(len(self._items))  # plain arrays: no zip on the way back
+        codes = np.empty((rows.shape[0], 3), dtype=np.int64)
+        codes[:, 0], codes[:, 1] = group, step
+        codes[:, 2] = -1 if key is None else key
+        np.save(f"{base}.rows.npy", np.ascontiguousarray(rows))
+        np.save(f"{base}.codes.npy", codes)
+        self._items.append((Path(f"{base}.rows.npy"), Path(f"{base}.codes.npy")))
 
-    def __iter__(self) -> Iterator[RecordingRows]:
+    def packed(self) -> Iterator[_Packed]:
+        """The stored recordings as ``[A | y]`` blocks (read back from disk when spilled)."""
         for item in self._items:
-            if isinstance(item, Path):
-                x = np.load(item)
-                key = x[:, -1].astype(np.int16)
-                yield RecordingRows(x[:, :-4], x[:, -4], x[:, -3].astype(np.int8), x[:, -2].astype(np.int64),
-                                    None if key.size and key[0] < 0 else key)
+            if isinstance(item, tuple):
+                rows, codes = np.load(item[0]), np.load(item[1])
+                key = codes[:, 2].astype(np.int16)
+                yield _Packed(rows, codes[:, 0].astype(np.int8), codes[:, 1],
+                              None if key.size and key[0] < 0 else key)
             else:
                 yield item
+
+    def __iter__(self) -> Iterator[RecordingRows]:
+        for p in self.packed():
+            yield RecordingRows(p.rows[:, :-1], p.rows[:, -1], p.group, p.step, p.key)
 
     def __len__(self) -> int:
         return len(self._items)
 
     @property
     def spilled(self) -> int:
-        return sum(isinstance(i, Path) for i in self._items)
+        return sum(isinstance(i, tuple) for i in self._items)
 
     def close(self) -> None:
         if self._cleanup is not None:
             self._cleanup()
         self._items.clear()
+
+
+@dataclass(frozen=True, eq=False)
+class _Packed:
+    rows: np.ndarray
+    group: np.ndarray
+    step: np.ndarray
+    key: np.ndarray | None
 
 
 @dataclass
@@ -114,16 +141,22 @@ class RowStatistics:
     counts: dict[tuple[str, str], int] = field(default_factory=dict)
 
     def add(self, key: tuple[str, str], rows: np.ndarray) -> None:
-        """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR)."""
+        """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR over the
+        columns that are not zero in the rows or the factor: a key's rows leave most columns zero)."""
         if rows.shape[0] == 0:
             return
         old = self.factors.get(key)
-        stacked = rows if old is None else np.vstack([old, rows])
-        if stacked.shape[0] >= self.width + 1:
-            R = triangular_factor(stacked)
-        else:
-            R = np.zeros((self.width + 1, self.width + 1))
-            R[: stacked.shape[0]] = np.linalg.qr(stacked, mode="r")
+        used = np.abs(rows).max(axis=0) > 0
+        if old is not None:
+            used |= np.abs(old).max(axis=0) > 0
+        cols = np.flatnonzero(used)
+        parts = [np.linalg.qr(rows[i:i + _QR_ROWS][:, cols], mode="r") for i in range(0, rows.shape[0], _QR_ROWS)]
+        if old is not None:
+            parts.append(old[:, cols])
+        stacked = np.vstack(parts) if len(parts) > 1 else parts[0]
+        R = np.zeros((self.width + 1, self.width + 1))
+        r = np.linalg.qr(stacked, mode="r") if len(parts) > 1 else stacked
+        R[np.ix_(np.arange(r.shape[0]), cols)] = r
         self.factors[key] = R
         self.counts[key] = self.counts.get(key, 0) + rows.shape[0]
 
@@ -133,51 +166,64 @@ class RowStatistics:
 
     def key_code(self, key: tuple[str, str]) -> int:
         """Position of ``key`` among the keys (a new key gets the next one)."""
+        codes = self.__dict__.setdefault("_codes", {})
         if key not in self.factors:
             self.factors[key] = np.zeros((self.width + 1, self.width + 1))
             self.counts[key] = 0
-        return list(self.factors).index(key)
+        if key not in codes:
+            codes.update((k, i) for i, k in enumerate(self.factors))
+        return codes[key]
 
     def factor(self, key: tuple[str, str]) -> np.ndarray:
         """Pseudo-rows ``R`` (width + 1, width + 1) of ``key``: ``R^T R`` is the normal matrix of its rows."""
         return self.factors[key]
 
 
-def _block_rows(b: EquationBlock, offsets: bool) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
-    """Per coordinate j of a block: (j, kept [A | y] rows, their sample indices)."""
-    for j in range(len(b.coordinates)):
-        keep = b.keep[:, j]
-        if not keep.any():
-            continue
-        parts = [b.regressor[keep, j, :]]
-        if offsets:
-            parts.append(b.offset_regressor[keep, j, :])
-        parts.append(b.torque[keep, j][:, None])
-        yield j, np.concatenate(parts, axis=1), b.sample[keep]
-
-
 def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store: RowStore | None,
                    group_names: dict[str, int], *, offsets: bool) -> None:
-    """Add the kept rows of ``blocks`` (one log) to ``stats`` and, per recording, to ``store``."""
-    per_key: dict[tuple[str, str], list[np.ndarray]] = {}
-    recording: dict[str, list[tuple[np.ndarray, ...]]] = {}
+    """Add the kept rows of ``blocks`` (one log) to ``stats`` and, per recording, to ``store``.
+
+    The kept rows ``[H_k^T Theta | H_k^T B | H_k^T B u]`` of all blocks are gathered in one array
+    (:func:`._kernels.kept_rows`; per block, coordinate by coordinate, in time order); the rows of
+    each (segment, coordinate) are merged into its triangular factor, those of each recording go
+    to the store as they lie in the array."""
+    plan, total = [], 0
     for b in blocks:
-        for j, rows, step in _block_rows(b, offsets):
-            coord = b.coordinates[j]
-            key = (b.segment, coord)
-            per_key.setdefault(key, []).append(rows)
-            code = group_names.setdefault(coord, len(group_names))
-            key_code = stats.key_code(key)
-            recording.setdefault(b.recording, []).append(
-                (rows, np.full(rows.shape[0], code, np.int8), step, np.full(rows.shape[0], key_code, np.int16)))
-    for key, parts in per_key.items():
-        stats.add(key, np.concatenate(parts) if len(parts) > 1 else parts[0])
+        counts = np.count_nonzero(b.keep, axis=0)
+        if not counts.any():
+            continue
+        key = np.full(len(b.coordinates), -1, dtype=np.int16)
+        group = np.zeros(len(b.coordinates), dtype=np.int8)
+        for j, coord in enumerate(b.coordinates):
+            if counts[j]:
+                group[j] = group_names.setdefault(coord, len(group_names))
+                key[j] = stats.key_code((b.segment, coord))
+        plan.append((b, key, group, int(counts.sum())))
+        total += int(counts.sum())
+    if not total:
+        return
+    rows = np.empty((total, stats.width + 1))
+    key, step, group = np.empty(total, np.int16), np.empty(total, np.int64), np.empty(total, np.int8)
+    start, recordings = 0, []
+    for b, key_of, group_of, m in plan:
+        offs = b.offset_regressor if offsets else np.zeros((0, 1, 4))
+        kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets,
+                  rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m])
+        if recordings and recordings[-1][0] == b.recording:
+            recordings[-1][2] = start + m
+        else:
+            recordings.append([b.recording, start, start + m])
+        start += m
+    order = np.argsort(key, kind="stable")
+    ordered = rows[order]
+    bounds = np.flatnonzero(np.diff(key[order])) + 1
+    names = list(stats.factors)
+    for a, e in zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [total]]).tolist()):
+        stats.add(names[int(key[order[a]])], ordered[a:e])
     if store is None:
         return
-    for parts in recording.values():
-        rows = np.concatenate([p[0] for p in parts])
-        store.add(RecordingRows(rows[:, :-1], rows[:, -1].copy(), *(np.concatenate([p[k] for p in parts])
-                                                                     for k in (1, 2, 3))))
+    for _, a, e in recordings:
+        store.add_packed(rows[a:e], group[a:e], step[a:e], key[a:e])
 
 
 @dataclass(frozen=True, eq=False)

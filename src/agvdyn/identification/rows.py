@@ -17,19 +17,21 @@ are dropped; stiction rows (sec. 7) and a guard around them and around mode chan
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from agvdyn.identification.equations import EquationBlock, projected_block
+from agvdyn.identification._kernels import stretch_modes, stretch_projection
+from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
-from agvdyn.kinematics import Mode, detect_mode, icr_residual, kinematic_model
+from agvdyn.kinematics import Mode, _constant_model, max_virtual_angle, nominal_steering
 from agvdyn.platform import Geometry
-from agvdyn.signals import guarded_mask, row_max_abs, runs
+from agvdyn.signals import row_max_abs, runs
 
 __all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations", "labels_present"]
 
@@ -87,24 +89,58 @@ class LogRows:
     modes: np.ndarray  # (N,) mode per sample (0: no mode, or not filtered)
 
 
+@dataclass(frozen=True, eq=False)
+class _ModeTables:
+    """Constants of the compiled mode and projection kernels, indexed by Mode value (0: none):
+    ``h`` (6, 9, 2) constant H_k, ``pinv`` (6, 2, 9) their pseudo-inverses, ``dof`` (6,),
+    ``thresholds`` (6, 2) stiction thresholds of the coordinates, ``nominal`` (3, 2) steering of
+    straight, rotation and lateral, ``h1`` (4, 2) wheel rows of H_1, ``offsets`` (6, 2, 4) ``H_k^T B e_i``."""
+
+    h: np.ndarray
+    pinv: np.ndarray
+    dof: np.ndarray
+    thresholds: np.ndarray
+    nominal: np.ndarray
+    h1: np.ndarray
+    offsets: np.ndarray
+
+
+@functools.lru_cache(maxsize=16)
+def _mode_tables(geometry: Geometry, thresholds: tuple[tuple[str, float], ...]) -> _ModeTables:
+    limits = dict(thresholds)
+    h, pinv = np.zeros((6, 9, 2)), np.zeros((6, 2, 9))
+    dof, thr, offsets = np.zeros(6, dtype=np.int64), np.zeros((6, 2)), np.zeros((6, 2, 4))
+    for m in Mode:
+        dof[m] = m.dof
+        thr[m, :m.dof] = [limits[c] for c in m.coordinates]
+        if m is Mode.CAR_LIKE:
+            continue
+        H = _constant_model(geometry, m)
+        h[m, :, :m.dof] = H
+        pinv[m, :m.dof] = np.linalg.pinv(H)
+        offsets[m, :m.dof] = geometry.i_G * H[5:, :].T
+    nominal = np.array([nominal_steering(geometry, m) for m in (Mode.STRAIGHT, Mode.ROTATION, Mode.LATERAL)])
+    return _ModeTables(h, pinv, dof, thr, nominal, np.ascontiguousarray(h[Mode.PARKING, 5:, :]), offsets)
+
+
+def _tables(geometry: Geometry, settings: IdentificationSettings) -> _ModeTables:
+    return _mode_tables(geometry, tuple(sorted(settings.thresholds().items())))
+
+
+def _modes_and_virtual_angle(geometry: Geometry, st: Stretch, settings: IdentificationSettings
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    tables = _tables(geometry, settings)
+    mode, av = np.empty(st.n, dtype=np.int8), np.zeros(st.n)
+    stretch_modes(st.alpha, st.trig, st.q_dot, geometry.b / geometry.l, max_virtual_angle(geometry),
+                  float(settings.mode_tolerance), tables.nominal, tables.h1, geometry.r, float(settings.rest_speed),
+                  float(settings.steering_rest_rate), mode, av)
+    return mode, av
+
+
 def row_modes(geometry: Geometry, st: Stretch, settings: IdentificationSettings) -> np.ndarray:
-    """Motion mode of each row of a filtered stretch (Mode values; 0 = in no mode of the model)."""
-    config = detect_mode(geometry, st.alpha, settings.mode_tolerance).astype(np.int8)
-    H1 = kinematic_model(geometry, Mode.PARKING, st.alpha[:1])[0]
-    rolling = st.beta_dot - st.alpha_dot @ H1[5:].T  # wheel rates not explained by steering at rest
-    rest = row_max_abs(rolling) * geometry.r < settings.rest_speed
-    steering = row_max_abs(st.alpha_dot) > settings.steering_rest_rate
-    mode = config.copy()
-    mode[rest & steering] = int(Mode.PARKING)
-    moving = ~rest
-    mode[moving & (config == int(Mode.PARKING))] = NO_MODE
-    moving_steered = moving & steering
-    straight_steered = np.flatnonzero(moving_steered & (config == int(Mode.STRAIGHT)))
-    if straight_steered.size:  # car-like through alpha_v = 0 when the ICR relation holds
-        on_icr = np.abs(icr_residual(geometry, st.alpha[straight_steered])) <= settings.mode_tolerance
-        mode[straight_steered] = np.where(on_icr, int(Mode.CAR_LIKE), NO_MODE)
-    mode[moving_steered & ((config == int(Mode.LATERAL)) | (config == int(Mode.ROTATION)))] = NO_MODE
-    return mode
+    """Motion mode of each row of a filtered stretch (Mode values; 0 = in no mode of the model),
+    by the rules of the module docstring (compiled: :func:`._kernels.stretch_modes`)."""
+    return _modes_and_virtual_angle(geometry, st, settings)[0]
 
 
 @dataclass(frozen=True)
@@ -156,23 +192,29 @@ def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndar
                 counts.label_mismatch[name] = counts.label_mismatch.get(name, 0) + off
 
 
-def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, usable: np.ndarray, labels: _Labels | None,
-                    settings: IdentificationSettings, recording: str, mine: np.ndarray) -> list[EquationBlock]:
+def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.ndarray, usable: np.ndarray,
+                    labels: _Labels | None, settings: IdentificationSettings, recording: str, mine: np.ndarray
+                    ) -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
-    then split where the label changes (block names only: no filter starts there)."""
+    then split where the label changes (block names only: no filter starts there). The rows of all
+    runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views."""
     guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
-    thresholds = settings.thresholds()
-    q_dot = st.q_dot
+    tables = _tables(geometry, settings)
+    n = st.n
+    Y, tau, s_dot = np.empty((n, 2, 11)), np.empty((n, 2)), np.empty((n, 2))
+    keep, offsets = np.empty((n, 2), dtype=bool), np.empty((n, 2, 4))
+    runs_found = np.empty((n, 2), dtype=np.int64)
+    count = stretch_projection(mode, av, st.q_dot, st.signals, st.torque, tables.h, tables.pinv, tables.dof, tables.thresholds,
+                               usable, mine, guard, geometry.l, geometry.b, geometry.a, geometry.r,
+                               max_virtual_angle(geometry), geometry.i_G, Y, tau, s_dot, keep, offsets, runs_found)
     blocks = []
-    for a, b in runs(mode):
-        if mode[a] == NO_MODE or not (usable[a:b] & mine[a:b]).any():
-            continue
+    base = st.rows.start
+    for a, b in runs_found[:count].tolist():
         m = Mode(int(mode[a]))
-        block = projected_block(geometry, m, st.alpha[a:b], q_dot[a:b], st.signals[a:b], st.torque[a:b],
-                                t=st.t[a:b], source=st.source, segment=f"mode {m.label}",
-                                stiction_threshold=thresholds, mode_tolerance=settings.mode_tolerance,
-                                recording=recording, sample=np.arange(st.rows.start + a, st.rows.start + b))
-        block = block.with_keep(guarded_mask(block.keep & usable[a:b, None], guard) & mine[a:b, None])
+        k = m.dof
+        offs = offsets[a:b, :k] if m is Mode.CAR_LIKE else np.broadcast_to(tables.offsets[m, :k], (b - a, k, 4))
+        block = EquationBlock(st.source, f"mode {m.label}", m, st.t[a:b], Y[a:b, :k], tau[a:b, :k], s_dot[a:b, :k],
+                              keep[a:b, :k], offs, recording, np.arange(base + a, base + b))
         if labels is None:
             blocks.append(block)
             continue
@@ -208,15 +250,16 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
         st = filtered_stretch(geometry, log, a, b, settings)
-        stretches.append(st)
-        modes[a:b] = row_modes(geometry, st, settings)
+        mode, av = _modes_and_virtual_angle(geometry, st, settings)
+        stretches.append((st, av))
+        modes[a:b] = mode
     counts.stretches = len(stretches)
-    in_mode = [(st, modes[st.rows]) for st in stretches]
-    speeds = np.concatenate([row_max_abs(st.slip)[(m != NO_MODE) & ~st.edge] for st, m in in_mode] or [np.zeros(0)])
+    in_mode = [(st, av, modes[st.rows]) for st, av in stretches]
+    speeds = np.concatenate([row_max_abs(st.slip)[(m != NO_MODE) & ~st.edge] for st, _, m in in_mode] or [np.zeros(0)])
     threshold = slip_threshold(speeds, settings)
     slip_guard = settings.slip_guard
     blocks, events = [], []
-    for k, (st, mode) in enumerate(in_mode):
+    for k, (st, av, mode) in enumerate(in_mode):
         drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
         if core is not None:  # an event belongs to the piece where it starts
             ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
@@ -241,7 +284,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & mine & (mode == m)))
         if labels is not None:
             _count_mismatch(counts, labels, st.rows, mode)
-        blocks += _stretch_blocks(geometry, st, mode, usable, labels, settings, f"{source}#{k}", mine)
+        blocks += _stretch_blocks(geometry, st, mode, av, usable, labels, settings, f"{source}#{k}", mine)
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
 
 

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from agvdyn.dynamics import regressor_signals
+from agvdyn._zero_phase import filtfilt_in_place, padded_buffer
+from agvdyn.identification._kernels import SIGNAL_CHANNELS, stretch_motion
 from agvdyn.identification.settings import Filtering, IdentificationSettings
-from agvdyn.odometry import odometry_with_slip
 from agvdyn.platform import Geometry
-from agvdyn.signals import filtered_derivatives, lowpass, row_max_abs, time_derivative, uniform_sample_time
+from agvdyn.signals import filter_design, lowpass, row_max_abs, uniform_sample_time
 
 __all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
            "torque_lead", "align_torque"]
@@ -35,11 +35,13 @@ class Stretch:
     """One continuous stretch of a log, filtered once; arrays have the stretch's rows first.
 
     ``rows``: the rows of the log. ``alpha`` (n, 2) filtered steering angles (clipped to the
-    stops), ``alpha_dot``, ``alpha_ddot``; ``beta_dot``, ``beta_ddot`` (n, 4); ``chassis_dot``,
-    ``chassis_ddot`` (n, 3) by odometry (eq. 3); ``slip`` (n, 4) slip speed per wheel (m/s);
+    stops); ``q_dot``, ``q_ddot`` (n, 9) joint velocities and accelerations, the chassis ones by
+    odometry (eq. 3), the others derivatives of the filtered angles (views: ``alpha_dot``,
+    ``beta_dot``, ``chassis_dot``, ...); ``slip`` (n, 4) slip speed per wheel (m/s);
     ``signals`` (n, 21) entries of Theta (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and
     ``torque`` (n, 4) motor torques, both filtered alike in PARALLEL filtering; ``edge`` (n,)
-    rows within the filter's transient of either end.
+    rows within the filter's transient of either end; ``trig`` (n, 4) sin and cos of the left and
+    right steering angle.
     """
 
     source: str
@@ -47,24 +49,41 @@ class Stretch:
     t: np.ndarray
     dt: float
     alpha: np.ndarray
-    alpha_dot: np.ndarray
-    alpha_ddot: np.ndarray
-    beta_dot: np.ndarray
-    beta_ddot: np.ndarray
-    chassis_dot: np.ndarray
-    chassis_ddot: np.ndarray
+    q_dot: np.ndarray
+    q_ddot: np.ndarray
     slip: np.ndarray
     signals: np.ndarray
     torque: np.ndarray
     edge: np.ndarray
+    trig: np.ndarray
 
     @property
     def n(self) -> int:
         return self.t.size
 
     @property
-    def q_dot(self) -> np.ndarray:
-        return np.concatenate([self.chassis_dot, self.alpha_dot, self.beta_dot], axis=1)
+    def chassis_dot(self) -> np.ndarray:
+        return self.q_dot[:, :3]
+
+    @property
+    def alpha_dot(self) -> np.ndarray:
+        return self.q_dot[:, 3:5]
+
+    @property
+    def beta_dot(self) -> np.ndarray:
+        return self.q_dot[:, 5:]
+
+    @property
+    def chassis_ddot(self) -> np.ndarray:
+        return self.q_ddot[:, :3]
+
+    @property
+    def alpha_ddot(self) -> np.ndarray:
+        return self.q_ddot[:, 3:5]
+
+    @property
+    def beta_ddot(self) -> np.ndarray:
+        return self.q_ddot[:, 5:]
 
 
 def torque_lead(log: Any, settings: IdentificationSettings) -> float:
@@ -129,6 +148,10 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
                      ) -> Stretch:
     """Filter, differentiate and evaluate one stretch ``[start, stop)`` of a log once.
 
+    The angles are low-passed in one compiled pass, then :func:`._kernels.stretch_motion` takes
+    derivatives, odometry (eq. 3), slip speeds, the entries of Theta and the aligned torques in one
+    pass, written straight into the buffer of the second filter (PARALLEL: all 25 channels).
+
     Raises ValueError (naming source and rows) when the stretch is not uniformly sampled or is
     too short for the zero-phase filter.
     """
@@ -137,26 +160,27 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     t = np.asarray(log.t[sl], dtype=float)
     where = f"{source}: rows {start}..{stop - 1} (t = {t[0]:.6g}..{t[-1]:.6g} s)"
     dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'")
-    angles = np.concatenate([log.alpha[sl], log.beta[sl]], axis=1)
-    f, f_d, f_dd = filtered_derivatives(angles, dt, settings.filter)
-    alpha = np.clip(f[:, :2], -math.pi / 2, math.pi / 2)  # the filter may overshoot the stops
-    alpha_dot, alpha_ddot = f_d[:, :2], f_dd[:, :2]
-    beta_dot, beta_ddot = f_d[:, 2:], f_dd[:, 2:]
-    chassis_dot, slip = odometry_with_slip(geometry, alpha, alpha_dot, beta_dot)
-    chassis_ddot = time_derivative(chassis_dot, dt)
-    q_dot = np.concatenate([chassis_dot, alpha_dot, beta_dot], axis=1)
-    q_ddot = np.concatenate([chassis_ddot, alpha_ddot, beta_ddot], axis=1)
-    signals = regressor_signals(q_dot, q_ddot, settings.epsilon)
-    torque = align_torque(np.asarray(log.torque[sl], dtype=float), torque_lead(log, settings))
-    if settings.filtering is Filtering.PARALLEL:
-        both = lowpass(np.concatenate([signals, torque], axis=1), dt, settings.filter)
-        signals, torque = both[:, :-4], both[:, -4:]
-    else:
-        torque = lowpass(torque, dt, settings.filter)
     n = t.size
+    sos, zi, pad = filter_design(dt, settings.filter)
+    if n <= pad:
+        raise ValueError(f"{where}: signal of {n} samples is too short for the zero-phase filter: needs more than {pad}")
+    angles = padded_buffer(n, 6, pad)
+    angles[pad:pad + n, :2] = log.alpha[sl]
+    angles[pad:pad + n, 2:] = log.beta[sl]
+    f = filtfilt_in_place(sos, zi, angles, pad)
+    alpha, trig, slip = np.empty((n, 2)), np.empty((n, 4)), np.empty((n, 4))
+    q_dot, q_ddot = np.empty((n, 9)), np.empty((n, 9))
+    both = padded_buffer(n, SIGNAL_CHANNELS, pad)
+    middle = both[pad:pad + n]
+    torque = np.ascontiguousarray(log.torque[sl], dtype=float)
+    stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,
+                   torque_lead(log, settings), alpha, trig, q_dot, q_ddot, slip, middle)
+    if settings.filtering is Filtering.PARALLEL:
+        filtfilt_in_place(sos, zi, both, pad)
+    else:
+        middle[:, 21:] = lowpass(middle[:, 21:], dt, settings.filter)
     k = edge_rows(settings, dt)
     edge = np.zeros(n, dtype=bool)
     edge[:k] = True
     edge[max(n - k, 0):] = True
-    return Stretch(source, sl, t, dt, alpha, alpha_dot, alpha_ddot, beta_dot, beta_ddot, chassis_dot,
-                   chassis_ddot, slip, signals, torque, edge)
+    return Stretch(source, sl, t, dt, alpha, q_dot, q_ddot, slip, middle[:, :21], middle[:, 21:], edge, trig)

@@ -34,6 +34,7 @@ from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LogError,
     SegmentRun,
     check_frame,
+    checked_columns,
     sample_time_error,
     _check,
     _show,
@@ -90,6 +91,12 @@ class Log:
         return cls(None if path is None else Path(path), checked, dict(sidecar or {}), clipped)
 
     def _array(self, columns: tuple[str, ...] | str) -> np.ndarray:
+        block = self.__dict__.get("_block")
+        if block is not None:  # read by read_log: views of the one float block the frame shares
+            names = columns if isinstance(columns, tuple) else (columns,)
+            first = LOG_COLUMNS.index(names[0])
+            if names == LOG_COLUMNS[first:first + len(names)]:
+                return block[:, first] if isinstance(columns, str) else block[:, first:first + len(names)]
         arr = self.frame[list(columns) if isinstance(columns, tuple) else columns].to_numpy(dtype=np.float64)
         arr.setflags(write=False)
         return arr
@@ -249,10 +256,48 @@ def read_log(
         The file cannot be read or does not satisfy the schema (message names file, column, row).
     """
     path = Path(path)
+    columns = _our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
+    if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
+        checked, clipped, block = checked_columns(*columns, path, max_gap_samples=max_gap_samples,
+                                                  stop_tolerance=stop_tolerance)
+        log = Log(path, checked, read_sidecar(path), clipped)
+        object.__setattr__(log, "_block", block)
+        return log
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
                               csv_rows=path.suffix.lower() == ".csv")
     return Log(path, checked, read_sidecar(path), clipped)
+
+
+def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
+    """The columns of a Parquet file that holds exactly our schema (float64 columns without nulls,
+    optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
+    None for any other file (read then through pandas, with its messages)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.ParquetFile(path).read(use_pandas_metadata=False)
+    except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
+        raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
+    names = table.column_names
+    if len(set(names)) != len(names) or set(names) - {*LOG_COLUMNS, SEGMENT_COLUMN} or set(LOG_COLUMNS) - set(names):
+        return None
+    columns = {}
+    for name in LOG_COLUMNS:
+        column = table.column(name)
+        if column.type != pa.float64() or column.null_count:
+            return None
+        columns[name] = column.to_numpy()
+    if SEGMENT_COLUMN not in names:
+        return columns, None
+    segment = table.column(SEGMENT_COLUMN)
+    if not pa.types.is_dictionary(segment.type) or not pa.types.is_string(segment.type.value_type):
+        return None
+    segment = segment.unify_dictionaries().combine_chunks() if segment.num_chunks != 1 else segment.chunk(0)
+    codes = pc.fill_null(segment.indices, -1).to_numpy(zero_copy_only=False).astype(np.int64)
+    return columns, (segment.dictionary.to_pylist(), codes)
 
 
 def sidecar_platform(log: Log) -> Geometry | None:

@@ -174,12 +174,7 @@ def _check(
     source = str(source)
     if not isinstance(frame, pd.DataFrame):
         raise LogError(f"{source}: expected a pandas DataFrame, got {type(frame).__name__}")
-    if isinstance(max_gap_samples, bool) or not (isinstance(max_gap_samples, (int, float)) and max_gap_samples >= 1):
-        raise ValueError(f"max_gap_samples={_show(max_gap_samples)}: expected a number >= 1 (math.inf: no limit)")
-    if isinstance(stop_tolerance, bool) or not (isinstance(stop_tolerance, (int, float)) and 0 <= stop_tolerance < math.inf):
-        raise ValueError(f"stop_tolerance={_show(stop_tolerance)}: expected a finite number >= 0 (rad)")
-    if isinstance(max_sample_time, bool) or not (isinstance(max_sample_time, (int, float)) and max_sample_time > 0):
-        raise ValueError(f"max_sample_time={_show(max_sample_time)}: expected a number > 0 (s)")
+    _check_options(max_gap_samples, stop_tolerance, max_sample_time)
     missing = [c for c in LOG_COLUMNS if c not in frame.columns]
     if missing:
         raise LogError(
@@ -189,18 +184,73 @@ def _check(
     n = len(frame)
     if n < 2:
         raise LogError(f"{source}: {n} rows: a log needs at least 2 samples")
-    data: dict[str, np.ndarray] = {}
-    for col in LOG_COLUMNS:
-        data[col] = _numeric_column(frame[col], source, col, csv_rows)
-    t = data["t"]
-    for col in LOG_COLUMNS:
-        bad = ~np.isfinite(data[col])
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise LogError(
-                f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {data[col][row]:.6g} "
-                "is not finite: expected a finite number (NaN, infinite or empty values are not allowed)"
-            )
+    block = np.empty((n, len(LOG_COLUMNS)))
+    for k, col in enumerate(LOG_COLUMNS):
+        block[:, k] = _numeric_column(frame[col], source, col, csv_rows)
+    clipped = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                           max_sample_time=max_sample_time, csv_rows=csv_rows, clip=clip)
+    # One float64 block (no pandas consolidation pass): fast to build and to slice.
+    out = pd.DataFrame(block, columns=list(LOG_COLUMNS), copy=False)
+    if SEGMENT_COLUMN in frame.columns:
+        out[SEGMENT_COLUMN] = _segment_column(frame[SEGMENT_COLUMN], source, block[:, 0], csv_rows)
+    for col in frame.columns:
+        if col not in out.columns:
+            out[col] = frame[col].to_numpy()
+    return out, clipped
+
+
+def checked_columns(
+    columns: dict[str, np.ndarray],
+    segment: tuple[list[str | None], np.ndarray] | None,
+    source: str | os.PathLike,
+    *,
+    max_gap_samples: float,
+    stop_tolerance: float,
+) -> tuple[pd.DataFrame, dict[str, int], np.ndarray]:
+    """The checks of :func:`check_frame` on columns read straight from a file in our schema:
+    ``columns`` float64 arrays of every name in :data:`LOG_COLUMNS`, ``segment`` (category names
+    or None for missing, int codes with -1 missing) or None. Returns the frame, the clipped rows
+    and the float block (N, 11) in :data:`LOG_COLUMNS` order that the frame's columns view."""
+    source = str(source)
+    _check_options(max_gap_samples, stop_tolerance, MAX_SAMPLE_TIME)
+    n = columns[LOG_COLUMNS[0]].shape[0]
+    if n < 2:
+        raise LogError(f"{source}: {n} rows: a log needs at least 2 samples")
+    block = np.empty((n, len(LOG_COLUMNS)))
+    for k, col in enumerate(LOG_COLUMNS):
+        block[:, k] = columns[col]
+    clipped = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                           max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=True)
+    out = pd.DataFrame(block, columns=list(LOG_COLUMNS), copy=False)
+    if segment is not None:
+        out[SEGMENT_COLUMN] = _segment_categorical(segment[0], segment[1], source, block[:, 0], False)
+    block.setflags(write=False)
+    return out, clipped, block
+
+
+def _check_options(max_gap_samples: Any, stop_tolerance: Any, max_sample_time: Any) -> None:
+    if isinstance(max_gap_samples, bool) or not (isinstance(max_gap_samples, (int, float)) and max_gap_samples >= 1):
+        raise ValueError(f"max_gap_samples={_show(max_gap_samples)}: expected a number >= 1 (math.inf: no limit)")
+    if isinstance(stop_tolerance, bool) or not (isinstance(stop_tolerance, (int, float)) and 0 <= stop_tolerance < math.inf):
+        raise ValueError(f"stop_tolerance={_show(stop_tolerance)}: expected a finite number >= 0 (rad)")
+    if isinstance(max_sample_time, bool) or not (isinstance(max_sample_time, (int, float)) and max_sample_time > 0):
+        raise ValueError(f"max_sample_time={_show(max_sample_time)}: expected a number > 0 (s)")
+
+
+def _check_block(block: np.ndarray, source: str, *, max_gap_samples: float, stop_tolerance: float,
+                 max_sample_time: float, csv_rows: bool, clip: bool) -> dict[str, int]:
+    """Checks of the float columns (N, 11) in :data:`LOG_COLUMNS` order; angles within the stop
+    tolerance clipped in place (``clip``). Returns the clipped rows per alpha column."""
+    if not np.isfinite(block).all():
+        for k, col in enumerate(LOG_COLUMNS):
+            bad = ~np.isfinite(block[:, k])
+            if bad.any():
+                row = int(np.argmax(bad))
+                raise LogError(
+                    f"{source}: column '{col}', {_row_text(source, row, csv_rows)}: value {block[row, k]:.6g} "
+                    "is not finite: expected a finite number (NaN, infinite or empty values are not allowed)"
+                )
+    t = block[:, 0]
     dt = np.diff(t)
     bad = dt <= 0
     if bad.any():
@@ -215,22 +265,26 @@ def _check(
         raise LogError(sample_time_error(source, nominal) or (
             f"{source}: column 't': median time step {nominal:.6g} s is longer than max_sample_time = "
             f"{max_sample_time:.6g} s; {_ms_hint()}"))
-    bad = dt > max_gap_samples * nominal
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise LogError(
-            f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: gap of {dt[i]:.6g} s "
-            f"({dt[i] / nominal:.1f} sample periods) from t = {_time_text(t[i])} s to t = {_time_text(t[i + 1])} s: "
-            f"expected at most {max_gap_samples:g} nominal sample periods of {nominal:.6g} s"
-        )
+    if max_gap_samples < math.inf:
+        bad = dt > max_gap_samples * nominal
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise LogError(
+                f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: gap of {dt[i]:.6g} s "
+                f"({dt[i] / nominal:.1f} sample periods) from t = {_time_text(t[i])} s to t = {_time_text(t[i + 1])} s: "
+                f"expected at most {max_gap_samples:g} nominal sample periods of {nominal:.6g} s"
+            )
     clipped = dict.fromkeys(ALPHA_COLUMNS, 0)
     limit = STEERING_LIMIT + stop_tolerance
-    for col in ALPHA_COLUMNS:
-        mag = np.abs(data[col])
-        bad = mag > limit
-        if bad.any():
-            row = int(np.argmax(bad))
-            value = float(data[col][row])
+    for k, col in enumerate(LOG_COLUMNS):
+        if col not in ALPHA_COLUMNS:
+            continue
+        values = block[:, k]
+        mag = np.abs(values)
+        peak = float(mag.max())
+        if peak > limit:
+            row = int(np.argmax(mag > limit))
+            value = float(values[row])
             stop = math.copysign(STEERING_LIMIT, value)
             raise LogError(
                 f"{source}: column '{col}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): steering "
@@ -239,20 +293,11 @@ def _check(
                 "expected radians in [-pi/2, pi/2] (degrees?); if the sensor really passes the stop by this much, raise the "
                 "tolerance (stop_tolerance= of read_log / load_log / Log.from_frame, or agvdyn convert --stop-tolerance RAD)"
             )
-        over = mag > STEERING_LIMIT
-        n_over = int(np.count_nonzero(over))
-        if n_over:
-            clipped[col] = n_over
+        if peak > STEERING_LIMIT:
+            clipped[col] = int(np.count_nonzero(mag > STEERING_LIMIT))
             if clip:
-                data[col] = np.clip(data[col], -STEERING_LIMIT, STEERING_LIMIT)
-    # One float64 block (no pandas consolidation pass): fast to build and to slice.
-    out = pd.DataFrame(np.column_stack([data[c] for c in LOG_COLUMNS]), columns=list(LOG_COLUMNS))
-    if SEGMENT_COLUMN in frame.columns:
-        out[SEGMENT_COLUMN] = _segment_column(frame[SEGMENT_COLUMN], source, t, csv_rows)
-    for col in frame.columns:
-        if col not in out.columns:
-            out[col] = frame[col].to_numpy()
-    return out, clipped
+                np.clip(values, -STEERING_LIMIT, STEERING_LIMIT, out=values)
+    return clipped
 
 
 def _numeric_column(series: pd.Series, source: str, col: str, csv_rows: bool) -> np.ndarray:
@@ -278,17 +323,7 @@ def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: boo
         cat = series.array
         names = pd.Series(cat.categories.astype("string")).str.strip()
         names = names.mask(names == "", pd.NA).to_numpy(dtype=object, na_value=None)
-        codes = np.asarray(cat.codes)
-        lookup = np.array([-1 if v is None else (SEGMENTS.index(v) if v in SEGMENTS else -2) for v in names] + [-1])
-        new_codes = lookup[codes]  # code -1 (missing) picks the trailing -1
-        unknown = new_codes == -2
-        if unknown.any():
-            row = int(np.argmax(unknown))
-            raise LogError(
-                f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): "
-                f"unknown segment name {names[codes[row]]!r}: expected one of {list(SEGMENTS)} or empty"
-            )
-        return pd.Categorical.from_codes(new_codes, categories=list(SEGMENTS))
+        return _segment_categorical(list(names), np.asarray(cat.codes), source, t, csv_rows)
     text = series.astype("string").str.strip()
     # An empty field means "no segment" (for example a transition between phases).
     text = text.mask(text == "", pd.NA)
@@ -300,3 +335,20 @@ def _segment_column(series: pd.Series, source: str, t: np.ndarray, csv_rows: boo
             f"unknown segment name {text.iloc[row]!r}: expected one of {list(SEGMENTS)} or empty"
         )
     return pd.Categorical(text.to_numpy(dtype=object, na_value=None), categories=list(SEGMENTS))
+
+
+def _segment_categorical(names: list[str | None], codes: np.ndarray, source: str, t: np.ndarray,
+                         csv_rows: bool) -> pd.Categorical:
+    """Segment labels from category ``names`` (stripped; None for no segment) and ``codes``
+    (-1: missing) as a Categorical over :data:`SEGMENTS`; an unknown name is an error naming its first row."""
+    names = [None if v is None or not str(v).strip() else str(v).strip() for v in names]
+    lookup = np.array([-1 if v is None else (SEGMENTS.index(v) if v in SEGMENTS else -2) for v in names] + [-1])
+    new_codes = lookup[codes]  # code -1 (missing) picks the trailing -1
+    unknown = new_codes == -2
+    if unknown.any():
+        row = int(np.argmax(unknown))
+        raise LogError(
+            f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): "
+            f"unknown segment name {names[codes[row]]!r}: expected one of {list(SEGMENTS)} or empty"
+        )
+    return pd.Categorical.from_codes(new_codes, categories=list(SEGMENTS))

@@ -1,0 +1,305 @@
+"""Compiled kernels of the row pipeline: each fuses what the numpy formulation did in many passes
+over small temporaries, one sample at a time, and releases the GIL (recordings in threads).
+
+* :func:`stretch_motion`: derivatives of the filtered angles (``np.gradient``, second order, also
+  at the ends), odometry of eq. (3) and the slip speed of each contact point, chassis
+  accelerations, the 21 entries of Theta (eq. 16) and the torques aligned to the angle instants,
+  written into the padded buffer of the second zero-phase filter;
+* :func:`stretch_modes`: the motion mode of every row (eq. 9 and the rules of
+  :func:`agvdyn.identification.rows.row_modes`);
+* :func:`stretch_projection`: the rows of eq. (19), ``H_k^T Theta``, ``H_k^T B u``, the
+  generalized velocities and the kept rows (stiction mask and guard) of every run of one mode;
+* :func:`kept_rows`: the kept rows of a log's blocks, ``[H_k^T Theta | H_k^T B | H_k^T B u]``, in
+  one array (the input of the normal equations and of the row store).
+
+Each reproduces the numpy formulation operation by operation (same results to the last bit but
+for the order of a few sums); ``tests/test_kernels.py`` compares them.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from agvdyn.kinematics import car_like_model_into, icr_state_trig
+
+__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "SIGNAL_CHANNELS"]
+
+#: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
+SIGNAL_CHANNELS = 25
+#: |x| beyond which the C library's tanh returns +-1 exactly (glibc: 22).
+_TANH_SATURATION = 22.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _tanh(x):  # pragma: no cover - compiled
+    if x > _TANH_SATURATION:
+        return 1.0
+    if x < -_TANH_SATURATION:
+        return -1.0
+    return np.tanh(x)
+
+
+@numba.njit(cache=True, nogil=True)
+def _gradient(x, col_in, dt, out, col_out):  # pragma: no cover - compiled
+    """Column ``col_in`` of ``x`` differentiated as ``np.gradient(x, dt, edge_order=2)``."""
+    n = x.shape[0]
+    two_dt = 2.0 * dt
+    for i in range(1, n - 1):
+        out[i, col_out] = (x[i + 1, col_in] - x[i - 1, col_in]) / two_dt
+    a, b, c = -1.5 / dt, 2.0 / dt, -0.5 / dt
+    out[0, col_out] = a * x[0, col_in] + b * x[1, col_in] + c * x[2, col_in]
+    a, b, c = 0.5 / dt, -2.0 / dt, 1.5 / dt
+    out[n - 1, col_out] = a * x[n - 3, col_in] + b * x[n - 2, col_in] + c * x[n - 1, col_in]
+
+
+@numba.njit(cache=True, nogil=True)
+def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig):  # pragma: no cover
+    """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr). Writes
+    ``alpha`` (n, 2) clipped to the stops, ``trig`` (n, 4) their (sin, cos) left and right,
+    ``qd``, ``qdd`` (n, 9) joint velocities and accelerations (chassis by odometry, eq. 3),
+    ``slip`` (n, 4) slip speed per contact point (m/s), ``sig`` (n, 25) the entries of Theta
+    (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and the torques ``(1 - lead) m[k] + lead m[k-1]``.
+    Odometry as ``agvdyn.odometry._odometry`` (the constraint rows of eq. 1-2 without their zeros)."""
+    n = f.shape[0]
+    half_pi = np.pi / 2
+    for c in range(6):
+        _gradient(f, c, dt, qd, 3 + c)
+    for c in range(6):
+        _gradient(qd, 3 + c, dt, qdd, 3 + c)
+    cxs = (l / 2, -l / 2, l / 2, -l / 2)
+    cys = (b / 2, b / 2, -b / 2, -b / 2)
+    sides = (1.0, 1.0, -1.0, -1.0)
+    sigmas = (1.0, -1.0, 1.0, -1.0)
+    A = np.empty((8, 3))
+    rhs = np.empty(8)
+    for j in range(n):
+        al = min(max(f[j, 0], -half_pi), half_pi)
+        ar = min(max(f[j, 1], -half_pi), half_pi)
+        alpha[j, 0], alpha[j, 1] = al, ar
+        sl, cl, sr, cr = np.sin(al), np.cos(al), np.sin(ar), np.cos(ar)
+        trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
+        ad0, ad1 = qd[j, 3], qd[j, 4]
+        for i in range(4):
+            left = i < 2
+            sigma, side, cx, cy = sigmas[i], sides[i], cxs[i], cys[i]
+            c = cl if left else cr
+            s = sigma * (sl if left else sr)
+            A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
+            A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = c, s, -c * cy + s * cx - side * a
+            steer = -side * a * sigma
+            rhs[i] = 0.0
+            rhs[4 + i] = -(steer * (ad0 if left else ad1)) - (-r) * qd[j, 5 + i]
+        m00 = m01 = m02 = m11 = m12 = m22 = 0.0
+        g0 = g1 = g2 = 0.0
+        for row in range(8):
+            a0, a1, a2 = A[row, 0], A[row, 1], A[row, 2]
+            if row >= 4:
+                g0 += a0 * rhs[row]
+                g1 += a1 * rhs[row]
+                g2 += a2 * rhs[row]
+            m00 += a0 * a0
+            m01 += a0 * a1
+            m02 += a0 * a2
+            m11 += a1 * a1
+            m12 += a1 * a2
+            m22 += a2 * a2
+        c00 = m11 * m22 - m12 * m12
+        c01 = m12 * m02 - m01 * m22
+        c02 = m01 * m12 - m11 * m02
+        c11 = m00 * m22 - m02 * m02
+        c12 = m01 * m02 - m00 * m12
+        c22 = m00 * m11 - m01 * m01
+        det = m00 * c00 + m01 * c01 + m02 * c02
+        v0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
+        v1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
+        v2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
+        qd[j, 0], qd[j, 1], qd[j, 2] = v0, v1, v2
+        for w in range(4):
+            lat = A[w, 0] * v0 + A[w, 1] * v1 + A[w, 2] * v2 - rhs[w]
+            lon = A[4 + w, 0] * v0 + A[4 + w, 1] * v1 + A[4 + w, 2] * v2 - rhs[4 + w]
+            slip[j, w] = np.sqrt(lat * lat + lon * lon)
+    for c in range(3):
+        _gradient(qd, c, dt, qdd, c)
+    for j in range(n):
+        sig[j, 0] = qdd[j, 0] - qd[j, 1] * qd[j, 2]
+        sig[j, 1] = qdd[j, 1] + qd[j, 0] * qd[j, 2]
+        sig[j, 2] = qdd[j, 2]
+        for k in range(2):
+            sig[j, 3 + 3 * k] = qdd[j, 3 + k]
+            sig[j, 4 + 3 * k] = qd[j, 3 + k]
+            sig[j, 5 + 3 * k] = _tanh(qd[j, 3 + k] / eps)
+        for w in range(4):
+            sig[j, 9 + w] = qdd[j, 5 + w]
+            sig[j, 13 + w] = qd[j, 5 + w]
+            sig[j, 17 + w] = _tanh(qd[j, 5 + w] / eps)
+        for w in range(4):
+            if lead == 0.0 or j == 0:
+                sig[j, 21 + w] = torque[j, w]
+            else:
+                sig[j, 21 + w] = (1.0 - lead) * torque[j, w] + lead * torque[j - 1, w]
+
+
+@numba.njit(cache=True, nogil=True)
+def stretch_modes(alpha, trig, qd, k_icr, limit, tol, nominal, h1, r, rest_speed, steering_rate, mode, av):
+    # pragma: no cover - compiled
+    """Mode of each row (1..5, 0 = in no mode of the model) as ``rows.row_modes``; ``nominal``
+    (3, 2): steering of straight, rotation, lateral; ``h1`` (4, 2) wheel rows of H_1. ``av``: the
+    virtual angle of the rows whose ICR state was needed (every row in mode 2)."""
+    for j in range(alpha.shape[0]):
+        al, ar = alpha[j, 0], alpha[j, 1]
+        res = 0.0
+        have_icr = False
+        if abs(al - nominal[2, 0]) <= tol and abs(ar - nominal[2, 1]) <= tol:
+            config = 3
+        elif abs(al - nominal[1, 0]) <= tol and abs(ar - nominal[1, 1]) <= tol:
+            config = 4
+        elif abs(al - nominal[0, 0]) <= tol and abs(ar - nominal[0, 1]) <= tol:
+            config = 5
+        else:
+            av[j], res = icr_state_trig(k_icr, trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3])
+            have_icr = True
+            config = 2 if abs(res) <= tol and abs(av[j]) <= limit + tol else 1
+        ad0, ad1 = qd[j, 3], qd[j, 4]
+        roll = 0.0
+        for w in range(4):
+            roll = max(roll, abs(qd[j, 5 + w] - (ad0 * h1[w, 0] + ad1 * h1[w, 1])))
+        rest = roll * r < rest_speed
+        steering = max(abs(ad0), abs(ad1)) > steering_rate
+        m = config
+        if rest:
+            if steering:
+                m = 1
+        else:
+            if config == 1:
+                m = 0
+            elif steering and config == 5:
+                if not have_icr:
+                    av[j], res = icr_state_trig(k_icr, trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3])
+                m = 2 if abs(res) <= tol else 0
+            elif steering and (config == 3 or config == 4):
+                m = 0
+        mode[j] = m
+
+
+@numba.njit(cache=True, nogil=True)
+def _project_row(H, dof, S, T, i_G, y, tau):  # pragma: no cover - compiled
+    """``H_k^T Theta`` (dof, 11) from the entries S of Theta and ``H_k^T B u`` (dof,), as
+    ``agvdyn.dynamics.project_signals``; T the motor torques (4,)."""
+    for c in range(dof):
+        rot = H[2, c] * S[2]
+        y[c, 6] = H[0, c] * S[0] + H[1, c] * S[1]
+        y[c, 7] = rot
+        y[c, 0] = rot + H[3, c] * S[3]
+        y[c, 1] = H[3, c] * S[4]
+        y[c, 2] = H[3, c] * S[5]
+        y[c, 3] = rot + H[4, c] * S[6]
+        y[c, 4] = H[4, c] * S[7]
+        y[c, 5] = H[4, c] * S[8]
+        bw = dv = dc = u = 0.0
+        for w in range(4):
+            h = H[5 + w, c]
+            bw += h * S[9 + w]
+            dv += h * S[13 + w]
+            dc += h * S[17 + w]
+            u += h * T[w]
+        y[c, 10], y[c, 8], y[c, 9] = bw, dv, dc
+        tau[c] = i_G * u
+
+
+@numba.njit(cache=True, nogil=True)
+def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thresholds, usable, mine, guard,
+                       l, b, a, r, limit, i_G, Y, tau, s_dot, keep, offsets, runs):  # pragma: no cover
+    """Rows of eq. (19) of every run of one mode (mode != 0 with a usable row of its own) of a
+    stretch: ``Y`` (n, 2, 11) ``H_k^T Theta``, ``tau`` (n, 2), ``s_dot`` (n, 2) ``H_k^+ q_dot``,
+    ``offsets`` (n, 2, 4) ``H_k^T B e_i`` (mode 2 rows only; constant otherwise), ``keep`` (n, 2)
+    ``|s_dot| >= threshold`` and usable, with ``guard`` rows around a dropped row or the run's
+    ends dropped too, and own rows only. Slots beyond the mode's dof are not written. ``runs``
+    (n, 2) gets the runs; returns their number."""
+    n = mode.shape[0]
+    H = np.empty((9, 2))
+    dH = np.empty((9, 2))
+    n_runs = 0
+    start = 0
+    while start < n:
+        m = mode[start]
+        stop = start + 1
+        while stop < n and mode[stop] == m:
+            stop += 1
+        used = False
+        if m != 0:
+            for j in range(start, stop):
+                if usable[j] and mine[j]:
+                    used = True
+                    break
+        if not used:
+            start = stop
+            continue
+        runs[n_runs, 0], runs[n_runs, 1] = start, stop
+        n_runs += 1
+        dof = dofs[m]
+        for j in range(start, stop):
+            if m == 2:
+                v = min(max(av[j], -limit), limit)
+                car_like_model_into(l, b, a, r, v, H, dH)
+                n00 = n01 = n11 = r0 = r1 = 0.0
+                for i in range(9):
+                    n00 += H[i, 0] * H[i, 0]
+                    n01 += H[i, 0] * H[i, 1]
+                    n11 += H[i, 1] * H[i, 1]
+                    r0 += H[i, 0] * qd[j, i]
+                    r1 += H[i, 1] * qd[j, i]
+                det = n00 * n11 - n01 * n01
+                s_dot[j, 0] = (r0 * n11 - n01 * r1) / det
+                s_dot[j, 1] = (n00 * r1 - n01 * r0) / det
+                for c in range(2):
+                    for w in range(4):
+                        offsets[j, c, w] = i_G * H[5 + w, c]
+                _project_row(H, dof, sig[j], torque[j], i_G, Y[j], tau[j])
+            else:
+                Hm = h_const[m]
+                for c in range(dof):
+                    s = 0.0
+                    for i in range(9):
+                        s += pinv_const[m, c, i] * qd[j, i]
+                    s_dot[j, c] = s
+                _project_row(Hm, dof, sig[j], torque[j], i_G, Y[j], tau[j])
+        for c in range(dof):
+            thr = thresholds[m, c]
+            last = start - 1  # the rows before the run count as dropped
+            for j in range(start, stop):
+                if not (abs(s_dot[j, c]) >= thr and usable[j]):
+                    last = j
+                keep[j, c] = j - last > guard
+            nxt = stop  # and so do those after it
+            for j in range(stop - 1, start - 1, -1):
+                if not (abs(s_dot[j, c]) >= thr and usable[j]):
+                    nxt = j
+                keep[j, c] = keep[j, c] and nxt - j > guard and mine[j]
+        start = stop
+    return n_runs
+
+
+@numba.njit(cache=True, nogil=True)
+def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, out, key, step, group):
+    # pragma: no cover - compiled
+    """Append the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1):
+    ``[regressor | offsets | torque]``; ``key``, ``step``, ``group`` per row. Rows of slot c get
+    key ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Returns the rows written."""
+    n, dof = keep.shape
+    w = out.shape[1]
+    k = 0
+    for c in range(dof):
+        for j in range(n):
+            if not keep[j, c]:
+                continue
+            for p in range(11):
+                out[k, p] = regressor[j, c, p]
+            if offset_columns:
+                for p in range(4):
+                    out[k, 11 + p] = offsets[j, c, p]
+            out[k, w - 1] = torque[j, c]
+            key[k] = slot_key[c]
+            step[k] = sample[j]
+            group[k] = coord[c]
+            k += 1
+    return k
