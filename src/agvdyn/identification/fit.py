@@ -241,7 +241,14 @@ def _collinear_warnings(collinear: Sequence[Dependency], data: RegressionData, c
     return [f"poorly conditioned: {d.describe()}"
             + ("" if d.name in weak else f"; determined by the data: predicted std {100 * rel[d.name]:.2g} % of "
                "its value, sensitive to model errors")
+            + (_BW_ON_THE_FLOOR if d.name == "B_w" and d.name not in weak else "")
             for d in collinear]
+
+
+#: What B_w from motion on the floor is (docs/planning.md, "B_w from car-like motion").
+_BW_ON_THE_FLOOR = ("; on the floor B_w is the inertia seen at the contact points: wheel, gear and motor plus "
+                    "m r^2 of any mass over the contact point (steering units), and tyre compliance biases it "
+                    "(about -20 % with the simulator's tyres): compare with the lifted-wheel test")
 
 
 def _unexcited(missing: Sequence[Dependency], free: Sequence[str], est: Estimator
