@@ -280,11 +280,12 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
 
 
 @numba.njit(cache=True, nogil=True)
-def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, out, key, step, group):
-    # pragma: no cover - compiled
-    """Append the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1):
-    ``[regressor | offsets | torque]``; ``key``, ``step``, ``group`` per row. Rows of slot c get
-    key ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Returns the rows written."""
+def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, column, out, key, step,
+              group):  # pragma: no cover - compiled
+    """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1): the
+    columns of ``[regressor | offsets]`` at the positions ``column`` (natural column -> stored
+    one), the torque last; ``key``, ``step``, ``group`` per row. Rows of slot c get key
+    ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Returns the rows written."""
     n, dof = keep.shape
     w = out.shape[1]
     k = 0
@@ -293,10 +294,10 @@ def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_
             if not keep[j, c]:
                 continue
             for p in range(11):
-                out[k, p] = regressor[j, c, p]
+                out[k, column[p]] = regressor[j, c, p]
             if offset_columns:
                 for p in range(4):
-                    out[k, 11 + p] = offsets[j, c, p]
+                    out[k, column[11 + p]] = offsets[j, c, p]
             out[k, w - 1] = torque[j, c]
             key[k] = slot_key[c]
             step[k] = sample[j]

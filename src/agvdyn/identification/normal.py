@@ -24,15 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from agvdyn.dynamics import N_P
-from agvdyn.identifiability import triangular_factor
 from agvdyn.identification._kernels import kept_rows
 from agvdyn.identification.equations import EquationBlock
 
 #: Rows per QR of a tall-skinny factorization (fits the caches; fewer calls than more rows).
 _QR_ROWS = 2048
 
-__all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "row_statistics", "regression_data",
-           "stacked_regression_data"]
+__all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "LogReduction", "row_statistics",
+           "reduce_blocks", "merge_reduction", "regression_data", "stacked_regression_data", "triangular_rows"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,18 +65,24 @@ class RowStore:
     :meth:`add_packed` takes rows as they come from :func:`row_statistics`, one ``[A | y]`` block
     (views are kept as they are: no copy; a spilled block is written as one plain array)."""
 
-    def __init__(self, budget: int = 64 << 20) -> None:
+    def __init__(self, budget: int = 64 << 20, columns: Sequence[int] | None = None) -> None:
         self.budget = budget
-        self._items: list[RecordingRows | _Packed | tuple[Path, Path]] = []
+        #: natural column of each stored column of A (None: as given); see :meth:`free_rows`
+        self.columns = None if columns is None else np.asarray(columns, dtype=np.int64)
+        self._items: list[_Packed | tuple[Path, Path]] = []
         self._bytes = 0
         self._folder: Path | None = None
         self._cleanup: weakref.finalize | None = None
+        self._keys = True
 
     def add(self, rows: RecordingRows) -> None:
-        self.add_packed(np.column_stack([rows.A, rows.y]), rows.group, rows.step, rows.key)
+        A = rows.A if self.columns is None else rows.A[:, self.columns]
+        self.add_packed(np.column_stack([A, rows.y]), rows.group, rows.step, rows.key)
 
     def add_packed(self, rows: np.ndarray, group: np.ndarray, step: np.ndarray, key: np.ndarray | None) -> None:
-        """Rows ``[A | y]`` (m, w + 1) of one recording with their coordinate codes, steps and keys."""
+        """Rows ``[A | y]`` (m, w + 1) of one recording (A's columns in the order of ``columns``)
+        with their coordinate codes, steps and keys."""
+        self._keys = self._keys and key is not None
         size = sum(x.nbytes for x in (rows, group, step, key) if x is not None)
         if self._bytes + size <= self.budget:
             self._items.append(_Packed(rows, group, step, key))
@@ -106,8 +111,33 @@ class RowStore:
                 yield item
 
     def __iter__(self) -> Iterator[RecordingRows]:
+        """Rows of each recording with A's columns in their natural order."""
+        inverse = None if self.columns is None else np.argsort(self.columns)
         for p in self.packed():
-            yield RecordingRows(p.rows[:, :-1], p.rows[:, -1], p.group, p.step, p.key)
+            A = p.rows[:, :-1] if inverse is None else p.rows[:, inverse]
+            yield RecordingRows(A, p.rows[:, -1], p.group, p.step, p.key)
+
+    def free_rows(self, free: Sequence[int], theta_fixed: np.ndarray) -> Iterator[RecordingRows]:
+        """Rows of each recording with the columns ``free`` only and ``y - A theta_fixed`` (eq. 24);
+        A a view of the stored rows when they hold the free columns first, in this order."""
+        free = list(free)
+        w = len(theta_fixed)
+        stored = np.arange(w) if self.columns is None else self.columns
+        first = list(stored[:len(free)]) == free
+        held = [i for i in range(w) if theta_fixed[stored[i]] != 0.0]
+        values = theta_fixed[stored[held]]
+        where = np.argsort(stored)[free] if not first else None
+        for p in self.packed():
+            y = p.rows[:, -1]
+            if held:
+                y = y - p.rows[:, held] @ values
+            A = p.rows[:, :len(free)] if first else p.rows[:, where]
+            yield RecordingRows(A, y, p.group, p.step, p.key)
+
+    @property
+    def keys(self) -> bool:
+        """Every recording carries the (segment, coordinate) key of its rows."""
+        return self._keys and bool(self._items)
 
     def __len__(self) -> int:
         return len(self._items)
@@ -139,26 +169,21 @@ class RowStatistics:
     width: int
     factors: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
     counts: dict[tuple[str, str], int] = field(default_factory=dict)
+    #: natural column of each column of the rows as added (None: natural order); factors are
+    #: kept in that order, :meth:`factor` returns them in the natural one
+    columns: np.ndarray | None = None
 
-    def add(self, key: tuple[str, str], rows: np.ndarray) -> None:
+    def add(self, key: tuple[str, str], rows: np.ndarray, count: int | None = None) -> None:
         """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR over the
-        columns that are not zero in the rows or the factor: a key's rows leave most columns zero)."""
+        columns that are not zero in the rows or the factor: a key's rows leave most columns zero).
+        ``count``: the rows they stand for when they are themselves a factor (default m)."""
         if rows.shape[0] == 0:
             return
         old = self.factors.get(key)
-        used = np.abs(rows).max(axis=0) > 0
-        if old is not None:
-            used |= np.abs(old).max(axis=0) > 0
-        cols = np.flatnonzero(used)
-        parts = [np.linalg.qr(rows[i:i + _QR_ROWS][:, cols], mode="r") for i in range(0, rows.shape[0], _QR_ROWS)]
-        if old is not None:
-            parts.append(old[:, cols])
-        stacked = np.vstack(parts) if len(parts) > 1 else parts[0]
-        R = np.zeros((self.width + 1, self.width + 1))
-        r = np.linalg.qr(stacked, mode="r") if len(parts) > 1 else stacked
-        R[np.ix_(np.arange(r.shape[0]), cols)] = r
-        self.factors[key] = R
-        self.counts[key] = self.counts.get(key, 0) + rows.shape[0]
+        if old is not None and not old.any():
+            old = None
+        self.factors[key] = triangular_rows(rows, self.width + 1, old)
+        self.counts[key] = self.counts.get(key, 0) + (rows.shape[0] if count is None else count)
 
     @property
     def n_rows(self) -> int:
@@ -176,17 +201,56 @@ class RowStatistics:
 
     def factor(self, key: tuple[str, str]) -> np.ndarray:
         """Pseudo-rows ``R`` (width + 1, width + 1) of ``key``: ``R^T R`` is the normal matrix of its rows."""
-        return self.factors[key]
+        R = self.factors[key]
+        if self.columns is None:
+            return R
+        out = np.empty_like(R)
+        out[:, np.append(self.columns, self.width)] = R
+        return out
 
 
-def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store: RowStore | None,
-                   group_names: dict[str, int], *, offsets: bool) -> None:
-    """Add the kept rows of ``blocks`` (one log) to ``stats`` and, per recording, to ``store``.
+def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None) -> np.ndarray:
+    """Triangular factor (size, size) of ``rows`` (m, size) stacked on ``old`` (a factor): QR in
+    chunks of rows over the columns that are not zero anywhere (the others stay zero)."""
+    used = np.abs(rows).max(axis=0) > 0
+    if old is not None:
+        used |= np.abs(old).max(axis=0) > 0
+    cols = np.flatnonzero(used)
+    parts = [np.linalg.qr(rows[i:i + _QR_ROWS][:, cols], mode="r") for i in range(0, rows.shape[0], _QR_ROWS)]
+    if old is not None:
+        parts.append(old[:, cols])
+    r = np.linalg.qr(np.vstack(parts), mode="r") if len(parts) > 1 else parts[0]
+    R = np.zeros((size, size))
+    R[np.ix_(np.arange(r.shape[0]), cols)] = r
+    return R
 
-    The kept rows ``[H_k^T Theta | H_k^T B | H_k^T B u]`` of all blocks are gathered in one array
-    (:func:`._kernels.kept_rows`; per block, coordinate by coordinate, in time order); the rows of
-    each (segment, coordinate) are merged into its triangular factor, those of each recording go
-    to the store as they lie in the array."""
+
+@dataclass(frozen=True, eq=False)
+class LogReduction:
+    """The kept rows of one log's blocks, reduced without shared state (threads may build several
+    at once; :func:`merge_reduction` adds them in log order). ``keys`` (segment, coordinate) and
+    ``groups`` (coordinate names) in the order first seen, ``factors``/``counts`` per key,
+    ``rows`` ``[A | y]`` with A's columns in the stored order, ``key``/``group`` codes into the
+    local lists, ``step``; ``recordings`` (name, start, stop) row ranges."""
+
+    keys: tuple[tuple[str, str], ...]
+    groups: tuple[str, ...]
+    factors: tuple[np.ndarray, ...]
+    counts: tuple[int, ...]
+    rows: np.ndarray
+    key: np.ndarray
+    group: np.ndarray
+    step: np.ndarray
+    recordings: tuple[tuple[str, int, int], ...]
+
+
+def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
+                  columns: np.ndarray | None = None) -> LogReduction:
+    """The kept rows ``[H_k^T Theta | H_k^T B | H_k^T B u]`` of ``blocks`` (one log) gathered in one
+    array (:func:`._kernels.kept_rows`; per block, coordinate by coordinate, in time order) and
+    the triangular factor of each (segment, coordinate)."""
+    keys: dict[tuple[str, str], int] = {}
+    groups: dict[str, int] = {}
     plan, total = [], 0
     for b in blocks:
         counts = np.count_nonzero(b.keep, axis=0)
@@ -196,18 +260,17 @@ def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store:
         group = np.zeros(len(b.coordinates), dtype=np.int8)
         for j, coord in enumerate(b.coordinates):
             if counts[j]:
-                group[j] = group_names.setdefault(coord, len(group_names))
-                key[j] = stats.key_code((b.segment, coord))
+                group[j] = groups.setdefault(coord, len(groups))
+                key[j] = keys.setdefault((b.segment, coord), len(keys))
         plan.append((b, key, group, int(counts.sum())))
         total += int(counts.sum())
-    if not total:
-        return
-    rows = np.empty((total, stats.width + 1))
+    rows = np.empty((total, width + 1))
     key, step, group = np.empty(total, np.int16), np.empty(total, np.int64), np.empty(total, np.int8)
+    column = np.arange(width) if columns is None else np.argsort(columns)
     start, recordings = 0, []
     for b, key_of, group_of, m in plan:
         offs = b.offset_regressor if offsets else np.zeros((0, 1, 4))
-        kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets,
+        kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets, column,
                   rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m])
         if recordings and recordings[-1][0] == b.recording:
             recordings[-1][2] = start + m
@@ -217,13 +280,36 @@ def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store:
     order = np.argsort(key, kind="stable")
     ordered = rows[order]
     bounds = np.flatnonzero(np.diff(key[order])) + 1
-    names = list(stats.factors)
+    factors, counts = [None] * len(keys), [0] * len(keys)
     for a, e in zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [total]]).tolist()):
-        stats.add(names[int(key[order[a]])], ordered[a:e])
-    if store is None:
+        if e > a:
+            k = int(key[order[a]])
+            factors[k], counts[k] = triangular_rows(ordered[a:e], width + 1), e - a
+    return LogReduction(tuple(keys), tuple(groups), tuple(factors), tuple(counts), rows, key, group, step,
+                        tuple(tuple(r) for r in recordings))
+
+
+def merge_reduction(reduction: LogReduction, stats: RowStatistics, store: RowStore | None,
+                    group_names: dict[str, int]) -> None:
+    """Add a log's reduction to ``stats`` (factors merged per key) and its recordings to ``store``,
+    with the key and coordinate codes of the whole identification (in the order first seen)."""
+    key_codes = np.array([stats.key_code(k) for k in reduction.keys] or [0], dtype=np.int16)
+    group_codes = np.array([group_names.setdefault(g, len(group_names)) for g in reduction.groups] or [0], np.int8)
+    for k, R, n in zip(reduction.keys, reduction.factors, reduction.counts):
+        stats.add(k, R, count=n)
+    if store is None or not reduction.rows.shape[0]:
         return
-    for _, a, e in recordings:
-        store.add_packed(rows[a:e], group[a:e], step[a:e], key[a:e])
+    key, group = key_codes[reduction.key], group_codes[reduction.group]
+    for _, a, e in reduction.recordings:
+        store.add_packed(reduction.rows[a:e], group[a:e], reduction.step[a:e], key[a:e])
+
+
+def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store: RowStore | None,
+                   group_names: dict[str, int], *, offsets: bool) -> None:
+    """Add the kept rows of ``blocks`` (one log) to ``stats`` and, per recording, to ``store``
+    (:func:`reduce_blocks`, then :func:`merge_reduction`)."""
+    merge_reduction(reduce_blocks(blocks, stats.width, offsets=offsets, columns=stats.columns), stats, store,
+                    group_names)
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,11 +340,8 @@ class RegressionData:
     def residual_rms(self, coef: np.ndarray) -> dict[str, float]:
         """RMS of tau - Theta p per "segment:coordinate" (pooled over logs): from the stored rows
         (exact), else from the pseudo-rows (to about 1e-8 of the torques)."""
-        if self.store is not None and all(rec.key is not None for rec in self.store):
-            sums = np.zeros(len(self.keys))
-            for rec in self.recordings():
-                r = rec.y - rec.A @ coef
-                sums += np.bincount(rec.key, weights=r * r, minlength=len(self.keys))
+        if self.store is not None and self.store.keys:
+            sums = self._residual_sums(coef)[1]
         else:
             x = np.append(coef, -1.0)
             sums = np.array([float((P @ x) @ (P @ x)) for P in self.key_pseudo])
@@ -298,11 +381,24 @@ class RegressionData:
     def group_rss(self, coef: np.ndarray) -> np.ndarray:
         """Residual sum of squares per group over the stored rows (exact, where the pseudo-rows lose
         digits to cancellation when the fit is close)."""
-        total = np.zeros(len(self.group_names))
+        return self._residual_sums(coef)[0].copy()
+
+    def _residual_sums(self, coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual sums of squares per group and per key over the stored rows (one pass, kept for
+        the last ``coef``: the regression asks for both at the same solution)."""
+        coef = np.asarray(coef, dtype=float)
+        cached = self.__dict__.get("_sums")
+        if cached is not None and cached[0].shape == coef.shape and np.array_equal(cached[0], coef):
+            return cached[1], cached[2]
+        groups, keys = np.zeros(len(self.group_names)), np.zeros(len(self.keys))
         for rec in self.recordings():
             r = rec.y - rec.A @ coef
-            total += np.bincount(rec.group, weights=r * r, minlength=total.size)
-        return total
+            r2 = r * r
+            groups += np.bincount(rec.group, weights=r2, minlength=groups.size)
+            if rec.key is not None and keys.size:
+                keys += np.bincount(rec.key, weights=r2, minlength=keys.size)
+        object.__setattr__(self, "_sums", (coef.copy(), groups, keys))
+        return groups, keys
 
     def stacked(self) -> "RegressionData":
         """The same system with every stored row in memory (for estimators that weigh single rows)."""
@@ -319,9 +415,7 @@ class RegressionData:
         """Rows of each recording with the free columns only and ``y`` as in eq. (24)."""
         if self.store is None:
             raise RuntimeError("these regression data keep no rows")
-        free = list(self.free)
-        for rec in self.store:
-            yield RecordingRows(rec.A[:, free], rec.y - rec.A @ self.theta_fixed, rec.group, rec.step, rec.key)
+        yield from self.store.free_rows(self.free, self.theta_fixed)
 
 
 def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Sequence[int], theta_fixed: np.ndarray,

@@ -3,14 +3,18 @@ filtered once, rows classified) -> normal equations -> regression (:mod:`.fit`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections import deque
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
+import numpy as np
 
 from agvdyn.identification.fit import check_fixed, columns, fit_blocks, fit_regression
-from agvdyn.identification.normal import RowStatistics, RowStore, regression_data, row_statistics
+from agvdyn.identification.normal import LogReduction, RowStatistics, RowStore, merge_reduction, reduce_blocks, regression_data
 from agvdyn.identification.plausibility import (
     ImplausibleError,
     diagnose_signs,
@@ -65,7 +69,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
              fixed: Mapping[str, float] = DEFAULT_FIXED,
              settings: IdentificationSettings = IdentificationSettings(),
              estimator: Estimator | None = None, experiment: str | None = None, mapping: Any = None,
-             keep_blocks: bool = True) -> Identification:
+             keep_blocks: bool = True, workers: int | None = None) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
 
     Logs are read and reduced one at a time (their kept rows to normal equations, see
@@ -84,6 +88,8 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
     mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
     keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
+    workers : threads that read and reduce logs at once (default :func:`default_workers`); the
+        result does not depend on it (logs are merged in their order).
 
     Raises
     ------
@@ -95,6 +101,8 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     SignConventionError
         The encoders contradict the rolling constraints unless a sign is changed (named).
     """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers={workers!r}: expected an integer >= 1 (threads reading and reducing logs)")
     items = [logs] if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha") else list(logs)
     if not items:
         raise ValueError("no logs given: expected at least one log")
@@ -116,7 +124,8 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
         return identify_lifted(loaded, geometry, settings=settings, estimator=estimator)
     stream = _LogStream(items, load, first, lifted=None if explicit else is_lifted, pieces=pieces)
     try:
-        return _identify_stream(stream, geometry, fixed, settings, estimator, keep_blocks)
+        return _identify_stream(stream, geometry, fixed, settings, estimator, keep_blocks,
+                                default_workers() if workers is None else int(workers))
     except (UnidentifiableError, ImplausibleError) as exc:
         loaded = [load(x) for x in items]
         # the diagnosis compares values and residuals only: the classic covariance is enough
@@ -146,25 +155,73 @@ class _LogStream:
         self.pieces = pieces
 
     def __iter__(self):
+        for job in self.jobs():
+            yield job()
+
+    def jobs(self):
+        """One callable per log (or piece of a long log) that reads it and returns ``(log, core)``;
+        pieces are read here, in order (each needs its neighbour's rows), whole files by the callable."""
         for k, item in enumerate(self.items):
             if self.pieces is not None and not hasattr(item, "alpha") and self.pieces(item) is not None:
-                yield from self.pieces(item)
+                for piece in self.pieces(item):
+                    yield lambda piece=piece: piece
                 continue
-            log = self.first if k == 0 and self.first is not None else self.load(item)
-            if self.lifted is not None and self.lifted(log):
-                from agvdyn.identification.lifted import lifted_experiment
+            yield functools.partial(self._whole, k, item)
 
-                lifted_experiment([self.first, log], None)  # raises: lifted and vehicle logs mixed
-            yield log, None
+    def _whole(self, k: int, item: Any) -> tuple[Any, None]:
+        log = self.first if k == 0 and self.first is not None else self.load(item)
+        if self.lifted is not None and self.lifted(log):
+            from agvdyn.identification.lifted import lifted_experiment
+
+            lifted_experiment([self.first, log], None)  # raises: lifted and vehicle logs mixed
+        return log, None
 
 
-def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str, float],
-                     settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool
-                     ) -> Identification:
+def default_workers() -> int:
+    """Threads that read and reduce logs at once by default: the cores this process may use, at most 4."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(4, cores))
+
+
+def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: IdentificationSettings, width: int,
+                  order: np.ndarray, workers: int) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
+    """``(log, core, rows, reduction)`` of every log of the stream, in order: read, filtered, rows
+    classified and reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a time
+    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs ahead."""
+
+    def work(job):
+        log, core = job()
+        rows = log_rows(log, geometry, settings, core)
+        return log, core, rows, reduce_blocks(rows.blocks, width, offsets=settings.torque_offsets, columns=order)
+
+    if workers <= 1:
+        for job in stream.jobs():
+            yield work(job)
+        return
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="agvdyn-identify")
+    try:
+        pending: deque = deque()
+        for job in stream.jobs():
+            pending.append(pool.submit(work, job))
+            if len(pending) > workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, float],
+                     settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool,
+                     workers: int = 1) -> Identification:
     """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one regression."""
     fixed = check_fixed(fixed)
     _, _, idx_free, p_fixed = columns(fixed, settings.torque_offsets)
-    stats, store, names = RowStatistics(len(p_fixed)), RowStore(), {}
+    order = np.array(list(idx_free) + [i for i in range(len(p_fixed)) if i not in idx_free])  # free columns first
+    stats, store, names = RowStatistics(len(p_fixed), columns=order), RowStore(columns=order), {}
     blocks: list[EquationBlock] = []
     notes: list[str] = []
     counts = RowCounts()
@@ -174,9 +231,8 @@ def _identify_stream(logs: Iterable[Any], geometry: Geometry, fixed: Mapping[str
     labels: set[str] = set()
     n_samples = 0
     try:
-        for log, core in logs:
-            rows = log_rows(log, geometry, settings, core)
-            row_statistics(rows.blocks, stats, store, names, offsets=settings.torque_offsets)
+        for log, core, rows, reduction in _reduced_logs(logs, geometry, settings, len(p_fixed), order, workers):
+            merge_reduction(reduction, stats, store, names)
             if keep_blocks:
                 blocks += rows.blocks
             notes += rows.notes
