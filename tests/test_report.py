@@ -8,13 +8,14 @@ import re
 
 import numpy as np
 import pytest
+import scipy.stats
 from matplotlib.figure import Figure
 from typer.testing import CliRunner
 
 import agvdyn
 from agvdyn import plots
 from agvdyn.cli import app
-from agvdyn.identification import identify, load_logs
+from agvdyn.identification import IdentificationSettings, identify, load_logs
 from agvdyn.io import write_log
 from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE, Geometry, read_parameters, write_parameters
 from agvdyn.report import (
@@ -32,6 +33,11 @@ from agvdyn.validation import validate
 from model_logs import identification_frame, lane_change_frame
 
 SHORT = {"steer_left": 6.0, "steer_right": 6.0, "straight": 6.0, "rotation": 6.0}
+#: The model logs here are exact (no sensor noise): their residual is a smooth numerical error whose
+#: correlation time grows with the log, so the default jackknife rightly warns that 6 s segments rest
+#: on single blocks (test_short_exact_log_warns_about_its_blocks). These tests are about the report:
+#: they take the HAC covariance, which has no such warning.
+HAC = IdentificationSettings(uncertainty="hac")
 #: Another vehicle than the paper's prototype: other geometry, other parameters.
 CART = Geometry(l=0.9, b=0.6, a=0.03, r=0.08, i_G=18.0, name="cart")
 CART_PARAMETERS = PAPER_PARAMETERS.replace(m_ch=420.0, C_ch=120.0, d_vw=0.4, d_cw=2.0)
@@ -63,7 +69,7 @@ def results(logs):
 @pytest.fixture(scope="module")
 def cart_report(logs):
     loaded = load_logs([logs["cart"]])
-    return make_report(loaded, CART)
+    return make_report(loaded, CART, settings=HAC)
 
 
 def _text(html: str) -> str:
@@ -161,7 +167,7 @@ def test_formatting_helpers():
 def test_html_report_sections_figures_and_atomic(results, logs, tmp_path):
     ident, val = results
     (log,) = load_logs([logs["ident"]])
-    report = make_report([log], PROTOTYPE, validation_log=load_logs([logs["lane"]])[0])
+    report = make_report([log], PROTOTYPE, validation_log=load_logs([logs["lane"]])[0], settings=HAC)
     assert report.verdict.outcome is Outcome.IDENTIFIED and report.reference is TABLE2
     path = write_report(tmp_path / "r.html", report)
     text = path.read_text()
@@ -198,7 +204,7 @@ def test_another_vehicle_has_no_table2_column(cart_report):
 def test_verdict_warns_when_a_parameter_is_off_the_reference(logs, cart_report):
     (cart,) = load_logs([logs["cart"]])
     wrong = Reference(CART_PARAMETERS.replace(m_ch=500.0), {}, "the data sheet", "file")
-    report = make_report([cart], CART, reference=wrong)
+    report = make_report([cart], CART, reference=wrong, settings=HAC)
     assert report.verdict.outcome is Outcome.WARNINGS
     (reason,) = report.verdict.reasons
     assert reason.startswith("m_ch = 420") and "-16.0 %" in reason and "the data sheet" in reason
@@ -207,7 +213,8 @@ def test_verdict_warns_when_a_parameter_is_off_the_reference(logs, cart_report):
 def test_cli_report_another_vehicle_reference_json(logs):
     out = logs["root"] / "cart.html"
     runner = CliRunner()
-    result = runner.invoke(app, ["report", "--ident", str(logs["cart"]), "--out", str(out), "--json"])
+    result = runner.invoke(app, ["report", "--ident", str(logs["cart"]), "--out", str(out), "--json",
+                                 "--uncertainty", "hac"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert data["verdict"] == "identified" and data["reference"] is None and data["out"] == str(out)
@@ -215,7 +222,7 @@ def test_cli_report_another_vehicle_reference_json(logs):
                          "provenance", "out", "params_out"}
     assert "within 5" not in _text(out.read_text())
     result = runner.invoke(app, ["report", "--ident", str(logs["cart"]), "--out", str(out),
-                                 "--reference", str(logs["cart_reference"])])
+                                 "--reference", str(logs["cart_reference"]), "--uncertainty", "hac"])
     assert result.exit_code == 0, result.output
     assert result.output.startswith("verdict: identified")
     visible = _text(out.read_text())
@@ -246,6 +253,14 @@ def test_cli_version():
     assert result.output.strip() == f"agvdyn {agvdyn.__version__}" and agvdyn.__version__[0].isdigit()
 
 
+def test_short_exact_log_warns_about_its_blocks(results):
+    """6 s segments of an exact log: one block of the jackknife carries the viscous frictions of the
+    steering; the identification says so and names them."""
+    ident, _ = results
+    (warning,) = [w for w in ident.warnings if "determined by one block" in w]
+    assert "d_vl" in warning and "d_vr" in warning and "m_ch" not in warning
+
+
 def test_cli_identify_json_keys_and_file(logs):
     out = logs["root"] / "p.yaml"
     result = CliRunner().invoke(app, ["identify", str(logs["ident"]), "--out", str(out), "--json"])
@@ -256,7 +271,11 @@ def test_cli_identify_json_keys_and_file(logs):
     assert data["parameters"]["C_l"]["identified"] is True
     low, high = data["parameters"]["C_l"]["ci95"]
     assert low < data["parameters"]["C_l"]["value"] < high
-    assert data["uncertainty"]["method"] == "hac" and data["uncertainty"]["bandwidth_steps"] >= 50
+    assert data["uncertainty"]["method"] == "jackknife" and data["uncertainty"]["bandwidth_steps"] >= 50
+    assert data["uncertainty"]["blocks"] >= 10 and 0 < data["uncertainty"]["max_block_leverage"] <= 1
+    assert set(data["uncertainty"]["dof"]) == set(data["parameters"]) - {"B_w"}
+    q = (high - low) / 2 / data["parameters"]["C_l"]["std"]  # Student's t of C_l's degrees of freedom
+    assert q == pytest.approx(scipy.stats.t.ppf(0.975, data["uncertainty"]["dof"]["C_l"]), rel=1e-9) and q > 1.96
     assert data["correlation"]["names"][0] == "C_l" and data["correlation"]["matrix"][0][0] == 1.0
     assert data["parameters"]["B_w"] == {"value": 0.121, "std": None}
     assert data["condition_number"] > 1

@@ -44,6 +44,7 @@ def test_version_answers_without_the_library():
 def test_literal_defaults_equal_the_library_constants():
     from agvdyn.cli import _defaults
     from agvdyn.identifiability import QR_TOLERANCE
+    from agvdyn.identification import IdentificationSettings
     from agvdyn.identification.estimators import ESTIMATORS
     from agvdyn.io import STOP_TOLERANCE
     from agvdyn.kinematics import MODE_TOLERANCE
@@ -52,6 +53,7 @@ def test_literal_defaults_equal_the_library_constants():
     assert _defaults.STOP_TOLERANCE == STOP_TOLERANCE
     assert _defaults.MODE_TOLERANCE == MODE_TOLERANCE
     assert _defaults.ESTIMATORS == tuple(ESTIMATORS)
+    assert _defaults.UNCERTAINTY == IdentificationSettings().uncertainty
 
 
 def test_package_names_are_still_there():

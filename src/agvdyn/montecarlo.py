@@ -84,9 +84,9 @@ def run_study_case(case: StudyCase) -> list[dict[str, Any]]:
                 continue
             value = math.nan if ident is None else getattr(ident.parameters, name)
             std = math.nan if ident is None else ident.std[name]
+            low, high = (math.nan, math.nan) if ident is None else ident.ci95(name)
             rows.append({"run": case.run, "estimator": estimator, "uncertainty": uncertainty, "parameter": name,
-                         "value": value, "std": std, "ci_low": value - 1.959964 * std,
-                         "ci_high": value + 1.959964 * std, "truth": getattr(truth, name), "seconds": seconds,
+                         "value": value, "std": std, "ci_low": low, "ci_high": high, "truth": getattr(truth, name), "seconds": seconds,
                          "std_classic": math.nan if ident is None else ident.std_classic.get(name, math.nan),
                          "seed": case.seed, "error": error})
     return rows

@@ -12,5 +12,7 @@ QR_TOLERANCE = 1e-6
 STOP_TOLERANCE = 0.01
 #: agvdyn.kinematics.MODE_TOLERANCE (mode detection, rad)
 MODE_TOLERANCE = 0.02
+#: agvdyn.identification.IdentificationSettings().uncertainty
+UNCERTAINTY = "jackknife"
 #: the names of agvdyn.identification.estimators.ESTIMATORS, in its order
 ESTIMATORS = ("ols", "wls", "robust", "bounded")

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agvdyn.cli._app import app, fail
+from agvdyn.cli._defaults import UNCERTAINTY
 
 # The library (scipy, numba) is imported inside the functions that use it: ``agvdyn --help`` stays fast.
 
@@ -51,7 +52,8 @@ EstimatorOpt = Annotated[str, typer.Option(
     help="ols (the paper's eq. 25), wls (weights per generalized coordinate), robust (IRLS, outliers such as "
          "slip down-weighted), bounded (masses, inertias > 0, frictions >= 0).")]
 UncertaintyOpt = Annotated[str, typer.Option(
-    help="classic (eq. 25, iid rows), hac (Newey-West for correlated residuals) or bootstrap (moving blocks).")]
+    help="classic (eq. 25, iid rows), hac (Newey-West for correlated residuals), jackknife (delete-one-block, "
+         "the calibrated default) or bootstrap (moving blocks).")]
 UnexcitedOpt = Annotated[Optional[str], typer.Option(
     help="refuse: parameters the data do not excite stop the identification, named; report: they get an "
          "unbounded 95 % interval (std null) and a warning, the rest is identified. Default: report with "
@@ -61,7 +63,8 @@ TorqueLeadOpt = Annotated[Optional[float], typer.Option(
          "torque until the next sample (zero-order hold). Default: the sidecar's torque_lead (the simulator "
          "writes 0.5), else 0.")]
 BandwidthOpt = Annotated[Optional[int], typer.Option(
-    help="HAC bandwidth / bootstrap block in samples; default: twice the residuals' correlation time, at least 50.")]
+    help="HAC bandwidth / bootstrap block / half the jackknife block in samples; default: twice the residuals' "
+         "correlation time, at least 50.")]
 
 
 def _fixed(items: Optional[list[str]]) -> dict[str, float]:
@@ -90,7 +93,7 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
               steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
-              slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = "hac",
+              slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = UNCERTAINTY,
               bandwidth: Optional[int] = None, unexcited: Optional[str] = None,
               torque_lead: Optional[float] = None) -> "IdentificationSettings":  # noqa: F821
     from agvdyn.identification import Filtering, IdentificationSettings
@@ -178,7 +181,7 @@ def identify(
     max_relative_std: MaxRelativeStdOpt = 0.5,
     slip_threshold: SlipThresholdOpt = None,
     estimator: EstimatorOpt = "wls",
-    uncertainty: UncertaintyOpt = "hac",
+    uncertainty: UncertaintyOpt = UNCERTAINTY,
     bandwidth: BandwidthOpt = None,
     unexcited: UnexcitedOpt = None,
     torque_lead: TorqueLeadOpt = None,
@@ -332,7 +335,7 @@ def report(
     max_relative_std: MaxRelativeStdOpt = 0.5,
     slip_threshold: SlipThresholdOpt = None,
     estimator: EstimatorOpt = "wls",
-    uncertainty: UncertaintyOpt = "hac",
+    uncertainty: UncertaintyOpt = UNCERTAINTY,
     bandwidth: BandwidthOpt = None,
     unexcited: UnexcitedOpt = None,
     torque_lead: TorqueLeadOpt = None,

@@ -22,7 +22,7 @@ def montecarlo(
     estimator: Optional[list[str]] = typer.Option(None, "--estimator", help=f"Estimator (repeatable): "
                                                   f"{', '.join(ESTIMATORS)}; default: the identification default."),
     uncertainty: Optional[list[str]] = typer.Option(None, "--uncertainty", help="Uncertainty method (repeatable): "
-                                                    "classic, hac, bootstrap; default: the identification default."),
+                                                    "classic, hac, jackknife, bootstrap; default: the identification default."),
     experiment: str = typer.Option("identification", help="Experiment simulated each run: identification, "
                                    "lane-change, lateral, or a trajectory file."),
     settings: Optional[Path] = typer.Option(None, help="Simulation settings (YAML, see docs/simulation.md)."),

@@ -128,8 +128,10 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         est.cov_, est.sigma2_ = est.cov_ * (sigma2 / est.sigma2_), sigma2
     unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
-                                replicates=settings.bootstrap_replicates, seed=settings.seed)
+                                replicates=settings.bootstrap_replicates, seed=settings.seed,
+                                names=free, reported=PARAMETER_NAMES)
     sd_all = unc.std
+    warnings += unc.warnings
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
     # columns are reported separately
     param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]
@@ -178,7 +180,10 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         residual_rms=residual_rms, n_rows=int(data.n_rows), n_samples=int(n_samples), blocks=tuple(blocks), settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
         estimator=getattr(est, "name", "") or type(est).__name__,
         std_classic=std_classic, correlation=correlation,
-        uncertainty={"method": unc.method.value, **unc.details},
+        uncertainty={"method": unc.method.value, **unc.details,
+                     **({} if unc.dof is None else {"dof": {n: (float(v) if math.isfinite(v) else None)
+                                                              for n, v in zip(free, unc.dof) if n in PARAMETER_NAMES}})},
+        quantiles={n: float(q) for n, q in zip(free, unc.quantile()) if n in PARAMETER_NAMES},
         active_bounds=tuple(getattr(est, "active_", ())),
         downweighted_rows=int(np.count_nonzero(getattr(est, "downweighted_", []))),
         offsets={} if offsets is None else dict(zip(OFFSET_NAMES, offsets.tolist())),

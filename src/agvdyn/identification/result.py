@@ -66,13 +66,16 @@ class Identification:
     uncertainty: dict[str, Any] = field(default_factory=dict)
     active_bounds: tuple[str, ...] = ()
     downweighted_rows: int = 0
+    quantiles: dict[str, float] = field(default_factory=dict)  # of ci95 per parameter; default 1.96
 
     def ci95(self, name: str) -> tuple[float, float] | None:
-        """95 % interval ``value +- 1.96 std`` of an estimated parameter, None for a fixed one."""
+        """95 % interval ``value +- q std`` of an estimated parameter (q: Student's t of the
+        uncertainty's degrees of freedom, 1.96 when the variance is taken as known), None for a fixed one."""
         if name not in self.std:
             return None
         v, s = getattr(self.parameters, name), self.std[name]
-        return (v - 1.959964 * s, v + 1.959964 * s)
+        q = self.quantiles.get(name, 1.959964)
+        return (v - q * s, v + q * s)
 
     def _parameter_entries(self) -> dict[str, dict[str, Any]]:
         """Per parameter value, std, ci95, std_classic; an unbounded interval (not excited) is

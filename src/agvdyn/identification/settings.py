@@ -128,9 +128,9 @@ class IdentificationSettings:
     estimator : ``ols``, ``wls``, ``robust`` or ``bounded`` (:mod:`agvdyn.identification.estimators`).
     robust_loss : ``tukey`` or ``huber`` (estimator ``robust``).
     bounds : extra bounds ``((name, low, high), ...)`` of the estimator ``bounded``.
-    uncertainty : ``classic`` (eq. 25), ``hac`` or ``bootstrap``
+    uncertainty : ``classic`` (eq. 25), ``hac``, ``jackknife`` (default) or ``bootstrap``
         (:mod:`agvdyn.identification.uncertainty`).
-    bandwidth : HAC bandwidth / bootstrap block length in samples; None: from the data,
+    bandwidth : HAC bandwidth / bootstrap block length / half the jackknife block in samples; None: from the data,
         ``bandwidth_factor`` times the residual scores' integrated correlation time, at least
         ``min_bandwidth``.
     bootstrap_replicates, seed : replicates and seed of the bootstrap.
@@ -165,7 +165,7 @@ class IdentificationSettings:
     estimator: str = "wls"
     robust_loss: str = "tukey"
     bounds: tuple[tuple[str, float, float], ...] = ()
-    uncertainty: str = "hac"
+    uncertainty: str = "jackknife"
     bandwidth: int | None = None
     bandwidth_factor: float = 2.0
     min_bandwidth: int = 50

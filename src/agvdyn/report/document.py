@@ -212,7 +212,8 @@ def _parameters(report: Report) -> str:
     parts.append('<div class="scroll">' + table(header, body, align="lrrrll", row_classes=classes) + "</div>")
     unc = ident.uncertainty
     method = {"hac": "heteroscedasticity- and autocorrelation-consistent (Bartlett) covariance",
-              "classic": "classic covariance of eq. (25)", "bootstrap": "block bootstrap"}.get(unc.get("method"), "")
+              "classic": "classic covariance of eq. (25)", "bootstrap": "block bootstrap",
+              "jackknife": "delete-one-block jackknife"}.get(unc.get("method"), "")
     bw = unc.get("bandwidth_steps")
     parts.append(
         f"<p>std: {esc(method)}{f', bandwidth {count(bw)} samples' if bw else ''}; 95&nbsp;% interval = value "
