@@ -40,16 +40,65 @@ def _tanh(x):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _gradient(x, col_in, dt, out, col_out):  # pragma: no cover - compiled
-    """Column ``col_in`` of ``x`` differentiated as ``np.gradient(x, dt, edge_order=2)``."""
+def _derivative(x, i, c, dt):  # pragma: no cover - compiled
+    """Row i of column c of ``np.gradient(x, dt, axis=0, edge_order=2)``."""
     n = x.shape[0]
-    two_dt = 2.0 * dt
-    for i in range(1, n - 1):
-        out[i, col_out] = (x[i + 1, col_in] - x[i - 1, col_in]) / two_dt
-    a, b, c = -1.5 / dt, 2.0 / dt, -0.5 / dt
-    out[0, col_out] = a * x[0, col_in] + b * x[1, col_in] + c * x[2, col_in]
-    a, b, c = 0.5 / dt, -2.0 / dt, 1.5 / dt
-    out[n - 1, col_out] = a * x[n - 3, col_in] + b * x[n - 2, col_in] + c * x[n - 1, col_in]
+    if i == 0:
+        return -1.5 / dt * x[0, c] + 2.0 / dt * x[1, c] + -0.5 / dt * x[2, c]
+    if i == n - 1:
+        return 0.5 / dt * x[n - 3, c] + -2.0 / dt * x[n - 2, c] + 1.5 / dt * x[n - 1, c]
+    return (x[i + 1, c] - x[i - 1, c]) / (2.0 * dt)
+
+
+@numba.njit(cache=True, nogil=True)
+def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no cover - compiled
+    """Chassis velocities of eq. (3) and the slip speed per wheel of row j, as
+    ``agvdyn.odometry._odometry`` (the rows of eq. 1-2 without their zeros; same sums)."""
+    sl, cl, sr, cr = np.sin(al), np.cos(al), np.sin(ar), np.cos(ar)
+    trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
+    ad0, ad1 = qd[j, 3], qd[j, 4]
+    for i in range(4):
+        left = i < 2
+        sigma = 1.0 if i % 2 == 0 else -1.0
+        side = 1.0 if left else -1.0
+        cx = l / 2 if i % 2 == 0 else -l / 2
+        cy = b / 2 if left else -b / 2
+        c = cl if left else cr
+        s = sigma * (sl if left else sr)
+        A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
+        A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = c, s, -c * cy + s * cx - side * a
+        steer = -side * a * sigma
+        rhs[i] = 0.0
+        rhs[4 + i] = -(steer * (ad0 if left else ad1)) - (-r) * qd[j, 5 + i]
+    m00 = m01 = m02 = m11 = m12 = m22 = 0.0
+    g0 = g1 = g2 = 0.0
+    for row in range(8):
+        a0, a1, a2 = A[row, 0], A[row, 1], A[row, 2]
+        if row >= 4:
+            g0 += a0 * rhs[row]
+            g1 += a1 * rhs[row]
+            g2 += a2 * rhs[row]
+        m00 += a0 * a0
+        m01 += a0 * a1
+        m02 += a0 * a2
+        m11 += a1 * a1
+        m12 += a1 * a2
+        m22 += a2 * a2
+    c00 = m11 * m22 - m12 * m12
+    c01 = m12 * m02 - m01 * m22
+    c02 = m01 * m12 - m11 * m02
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    v0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
+    v1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
+    v2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
+    qd[j, 0], qd[j, 1], qd[j, 2] = v0, v1, v2
+    for w in range(4):
+        lat = A[w, 0] * v0 + A[w, 1] * v1 + A[w, 2] * v2 - rhs[w]
+        lon = A[4 + w, 0] * v0 + A[4 + w, 1] * v1 + A[4 + w, 2] * v2 - rhs[4 + w]
+        slip[j, w] = np.sqrt(lat * lat + lon * lon)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -59,75 +108,35 @@ def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, s
     ``qd``, ``qdd`` (n, 9) joint velocities and accelerations (chassis by odometry, eq. 3),
     ``slip`` (n, 4) slip speed per contact point (m/s), ``sig`` (n, 25) the entries of Theta
     (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and the torques ``(1 - lead) m[k] + lead m[k-1]``.
-    Odometry as ``agvdyn.odometry._odometry`` (the constraint rows of eq. 1-2 without their zeros)."""
+
+    One sweep over the rows: row k's velocities and odometry, row k - 2's accelerations (their
+    central differences need the velocities of k - 3 and k - 1) and its signals, so that every
+    row is touched while in cache; derivatives as ``np.gradient(x, dt, edge_order=2)``."""
     n = f.shape[0]
     half_pi = np.pi / 2
-    for c in range(6):
-        _gradient(f, c, dt, qd, 3 + c)
-    for c in range(6):
-        _gradient(qd, 3 + c, dt, qdd, 3 + c)
-    cxs = (l / 2, -l / 2, l / 2, -l / 2)
-    cys = (b / 2, b / 2, -b / 2, -b / 2)
-    sides = (1.0, 1.0, -1.0, -1.0)
-    sigmas = (1.0, -1.0, 1.0, -1.0)
     A = np.empty((8, 3))
     rhs = np.empty(8)
-    for j in range(n):
-        al = min(max(f[j, 0], -half_pi), half_pi)
-        ar = min(max(f[j, 1], -half_pi), half_pi)
-        alpha[j, 0], alpha[j, 1] = al, ar
-        sl, cl, sr, cr = np.sin(al), np.cos(al), np.sin(ar), np.cos(ar)
-        trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
-        ad0, ad1 = qd[j, 3], qd[j, 4]
-        for i in range(4):
-            left = i < 2
-            sigma, side, cx, cy = sigmas[i], sides[i], cxs[i], cys[i]
-            c = cl if left else cr
-            s = sigma * (sl if left else sr)
-            A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
-            A[4 + i, 0], A[4 + i, 1], A[4 + i, 2] = c, s, -c * cy + s * cx - side * a
-            steer = -side * a * sigma
-            rhs[i] = 0.0
-            rhs[4 + i] = -(steer * (ad0 if left else ad1)) - (-r) * qd[j, 5 + i]
-        m00 = m01 = m02 = m11 = m12 = m22 = 0.0
-        g0 = g1 = g2 = 0.0
-        for row in range(8):
-            a0, a1, a2 = A[row, 0], A[row, 1], A[row, 2]
-            if row >= 4:
-                g0 += a0 * rhs[row]
-                g1 += a1 * rhs[row]
-                g2 += a2 * rhs[row]
-            m00 += a0 * a0
-            m01 += a0 * a1
-            m02 += a0 * a2
-            m11 += a1 * a1
-            m12 += a1 * a2
-            m22 += a2 * a2
-        c00 = m11 * m22 - m12 * m12
-        c01 = m12 * m02 - m01 * m22
-        c02 = m01 * m12 - m11 * m02
-        c11 = m00 * m22 - m02 * m02
-        c12 = m01 * m02 - m00 * m12
-        c22 = m00 * m11 - m01 * m01
-        det = m00 * c00 + m01 * c01 + m02 * c02
-        v0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
-        v1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
-        v2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
-        qd[j, 0], qd[j, 1], qd[j, 2] = v0, v1, v2
-        for w in range(4):
-            lat = A[w, 0] * v0 + A[w, 1] * v1 + A[w, 2] * v2 - rhs[w]
-            lon = A[4 + w, 0] * v0 + A[4 + w, 1] * v1 + A[4 + w, 2] * v2 - rhs[4 + w]
-            slip[j, w] = np.sqrt(lat * lat + lon * lon)
-    for c in range(3):
-        _gradient(qd, c, dt, qdd, c)
-    for j in range(n):
+    for k in range(n + 2):
+        if k < n:
+            j = k
+            for c in range(6):
+                qd[j, 3 + c] = _derivative(f, j, c, dt)
+            al = min(max(f[j, 0], -half_pi), half_pi)
+            ar = min(max(f[j, 1], -half_pi), half_pi)
+            alpha[j, 0], alpha[j, 1] = al, ar
+            _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs)
+        j = k - 2
+        if j < 0:
+            continue
+        for c in range(9):
+            qdd[j, c] = _derivative(qd, j, c, dt)
         sig[j, 0] = qdd[j, 0] - qd[j, 1] * qd[j, 2]
         sig[j, 1] = qdd[j, 1] + qd[j, 0] * qd[j, 2]
         sig[j, 2] = qdd[j, 2]
-        for k in range(2):
-            sig[j, 3 + 3 * k] = qdd[j, 3 + k]
-            sig[j, 4 + 3 * k] = qd[j, 3 + k]
-            sig[j, 5 + 3 * k] = _tanh(qd[j, 3 + k] / eps)
+        for c in range(2):
+            sig[j, 3 + 3 * c] = qdd[j, 3 + c]
+            sig[j, 4 + 3 * c] = qd[j, 3 + c]
+            sig[j, 5 + 3 * c] = _tanh(qd[j, 3 + c] / eps)
         for w in range(4):
             sig[j, 9 + w] = qdd[j, 5 + w]
             sig[j, 13 + w] = qd[j, 5 + w]
@@ -182,28 +191,28 @@ def stretch_modes(alpha, trig, qd, k_icr, limit, tol, nominal, h1, r, rest_speed
 
 
 @numba.njit(cache=True, nogil=True)
-def _project_row(H, dof, S, T, i_G, y, tau):  # pragma: no cover - compiled
-    """``H_k^T Theta`` (dof, 11) from the entries S of Theta and ``H_k^T B u`` (dof,), as
-    ``agvdyn.dynamics.project_signals``; T the motor torques (4,)."""
+def _project_row(H, dof, sig, torque, j, i_G, Y, tau):  # pragma: no cover - compiled
+    """Row j of ``H_k^T Theta`` (dof, 11) from the entries of Theta ``sig[j]`` and ``H_k^T B u``
+    (dof,) from the torques ``torque[j]``, as ``agvdyn.dynamics.project_signals``."""
     for c in range(dof):
-        rot = H[2, c] * S[2]
-        y[c, 6] = H[0, c] * S[0] + H[1, c] * S[1]
-        y[c, 7] = rot
-        y[c, 0] = rot + H[3, c] * S[3]
-        y[c, 1] = H[3, c] * S[4]
-        y[c, 2] = H[3, c] * S[5]
-        y[c, 3] = rot + H[4, c] * S[6]
-        y[c, 4] = H[4, c] * S[7]
-        y[c, 5] = H[4, c] * S[8]
+        rot = H[2, c] * sig[j, 2]
+        Y[j, c, 6] = H[0, c] * sig[j, 0] + H[1, c] * sig[j, 1]
+        Y[j, c, 7] = rot
+        Y[j, c, 0] = rot + H[3, c] * sig[j, 3]
+        Y[j, c, 1] = H[3, c] * sig[j, 4]
+        Y[j, c, 2] = H[3, c] * sig[j, 5]
+        Y[j, c, 3] = rot + H[4, c] * sig[j, 6]
+        Y[j, c, 4] = H[4, c] * sig[j, 7]
+        Y[j, c, 5] = H[4, c] * sig[j, 8]
         bw = dv = dc = u = 0.0
         for w in range(4):
             h = H[5 + w, c]
-            bw += h * S[9 + w]
-            dv += h * S[13 + w]
-            dc += h * S[17 + w]
-            u += h * T[w]
-        y[c, 10], y[c, 8], y[c, 9] = bw, dv, dc
-        tau[c] = i_G * u
+            bw += h * sig[j, 9 + w]
+            dv += h * sig[j, 13 + w]
+            dc += h * sig[j, 17 + w]
+            u += h * torque[j, w]
+        Y[j, c, 10], Y[j, c, 8], Y[j, c, 9] = bw, dv, dc
+        tau[j, c] = i_G * u
 
 
 @numba.njit(cache=True, nogil=True)
@@ -218,6 +227,7 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
     n = mode.shape[0]
     H = np.empty((9, 2))
     dH = np.empty((9, 2))
+    P = np.empty((2, 9))
     n_runs = 0
     start = 0
     while start < n:
@@ -237,6 +247,11 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
         runs[n_runs, 0], runs[n_runs, 1] = start, stop
         n_runs += 1
         dof = dofs[m]
+        if m != 2:
+            for i in range(9):
+                for c in range(2):
+                    H[i, c] = h_const[m, i, c]
+                    P[c, i] = pinv_const[m, c, i]
         for j in range(start, stop):
             if m == 2:
                 v = min(max(av[j], -limit), limit)
@@ -254,15 +269,13 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
                 for c in range(2):
                     for w in range(4):
                         offsets[j, c, w] = i_G * H[5 + w, c]
-                _project_row(H, dof, sig[j], torque[j], i_G, Y[j], tau[j])
             else:
-                Hm = h_const[m]
                 for c in range(dof):
                     s = 0.0
                     for i in range(9):
-                        s += pinv_const[m, c, i] * qd[j, i]
+                        s += P[c, i] * qd[j, i]
                     s_dot[j, c] = s
-                _project_row(Hm, dof, sig[j], torque[j], i_G, Y[j], tau[j])
+            _project_row(H, dof, sig, torque, j, i_G, Y, tau)
         for c in range(dof):
             thr = thresholds[m, c]
             last = start - 1  # the rows before the run count as dropped
@@ -281,11 +294,13 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
 
 @numba.njit(cache=True, nogil=True)
 def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, column, out, key, step,
-              group):  # pragma: no cover - compiled
+              group, by_key, cursor):  # pragma: no cover - compiled
     """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1): the
     columns of ``[regressor | offsets]`` at the positions ``column`` (natural column -> stored
     one), the torque last; ``key``, ``step``, ``group`` per row. Rows of slot c get key
-    ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Returns the rows written."""
+    ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Each row is also
+    written to ``by_key[cursor[key]]`` (and the cursor advanced): the rows grouped by key.
+    Returns the rows written."""
     n, dof = keep.shape
     w = out.shape[1]
     k = 0
@@ -302,5 +317,9 @@ def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_
             key[k] = slot_key[c]
             step[k] = sample[j]
             group[k] = coord[c]
+            dest = cursor[slot_key[c]]
+            cursor[slot_key[c]] = dest + 1
+            for p in range(w):
+                by_key[dest, p] = out[k, p]
             k += 1
     return k

@@ -26,6 +26,7 @@ import numpy as np
 from agvdyn.dynamics import N_P
 from agvdyn.identification._kernels import kept_rows
 from agvdyn.identification.equations import EquationBlock
+from agvdyn.identification.workspace import Workspace, empty
 
 #: Rows per QR of a tall-skinny factorization (fits the caches; fewer calls than more rows).
 _QR_ROWS = 2048
@@ -245,13 +246,13 @@ class LogReduction:
 
 
 def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
-                  columns: np.ndarray | None = None) -> LogReduction:
+                  columns: np.ndarray | None = None, workspace: Workspace | None = None) -> LogReduction:
     """The kept rows ``[H_k^T Theta | H_k^T B | H_k^T B u]`` of ``blocks`` (one log) gathered in one
     array (:func:`._kernels.kept_rows`; per block, coordinate by coordinate, in time order) and
     the triangular factor of each (segment, coordinate)."""
     keys: dict[tuple[str, str], int] = {}
     groups: dict[str, int] = {}
-    plan, total = [], 0
+    plan, per_key = [], []
     for b in blocks:
         counts = np.count_nonzero(b.keep, axis=0)
         if not counts.any():
@@ -262,30 +263,31 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
             if counts[j]:
                 group[j] = groups.setdefault(coord, len(groups))
                 key[j] = keys.setdefault((b.segment, coord), len(keys))
+                per_key += [0] * (len(keys) - len(per_key))
+                per_key[key[j]] += int(counts[j])
         plan.append((b, key, group, int(counts.sum())))
-        total += int(counts.sum())
+    total = sum(per_key)
     rows = np.empty((total, width + 1))
+    by_key = empty(workspace, "by_key", rows.shape)
+    ends = np.cumsum(per_key, dtype=np.int64)
+    cursor = ends - np.asarray(per_key, dtype=np.int64)
+    starts = cursor.copy()
     key, step, group = np.empty(total, np.int16), np.empty(total, np.int64), np.empty(total, np.int8)
     column = np.arange(width) if columns is None else np.argsort(columns)
     start, recordings = 0, []
     for b, key_of, group_of, m in plan:
         offs = b.offset_regressor if offsets else np.zeros((0, 1, 4))
         kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets, column,
-                  rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m])
+                  rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m],
+                  by_key, cursor)
         if recordings and recordings[-1][0] == b.recording:
             recordings[-1][2] = start + m
         else:
             recordings.append([b.recording, start, start + m])
         start += m
-    order = np.argsort(key, kind="stable")
-    ordered = rows[order]
-    bounds = np.flatnonzero(np.diff(key[order])) + 1
-    factors, counts = [None] * len(keys), [0] * len(keys)
-    for a, e in zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [total]]).tolist()):
-        if e > a:
-            k = int(key[order[a]])
-            factors[k], counts[k] = triangular_rows(ordered[a:e], width + 1), e - a
-    return LogReduction(tuple(keys), tuple(groups), tuple(factors), tuple(counts), rows, key, group, step,
+    factors = tuple(triangular_rows(by_key[a:e], width + 1) for a, e in zip(starts.tolist(), ends.tolist()))
+    counts = tuple(per_key)
+    return LogReduction(tuple(keys), tuple(groups), factors, counts, rows, key, group, step,
                         tuple(tuple(r) for r in recordings))
 
 

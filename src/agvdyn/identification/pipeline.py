@@ -6,6 +6,7 @@ import dataclasses
 import functools
 import math
 import os
+import threading
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -26,6 +27,7 @@ from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
 from agvdyn.identification.rows import RowCounts, labels_present, log_rows
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
+from agvdyn.identification.workspace import Workspace
 from agvdyn.identification.slip import SlipEvent
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.platform import PROTOTYPE, Geometry, read_platform
@@ -187,15 +189,24 @@ def default_workers() -> int:
 
 
 def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: IdentificationSettings, width: int,
-                  order: np.ndarray, workers: int) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
+                  order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
     """``(log, core, rows, reduction)`` of every log of the stream, in order: read, filtered, rows
     classified and reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a time
-    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs ahead."""
+    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs ahead.
+    ``reuse``: the blocks are not wanted (``rows.blocks`` empty), each thread reuses its buffers."""
+
+    local = threading.local()
 
     def work(job):
         log, core = job()
-        rows = log_rows(log, geometry, settings, core)
-        return log, core, rows, reduce_blocks(rows.blocks, width, offsets=settings.torque_offsets, columns=order)
+        space = None
+        if reuse:  # the blocks are dropped once reduced: the next log of this thread reuses the buffers
+            space = local.__dict__.setdefault("workspace", Workspace())
+        rows = log_rows(log, geometry, settings, core, space)
+        reduction = reduce_blocks(rows.blocks, width, offsets=settings.torque_offsets, columns=order, workspace=space)
+        if reuse:
+            rows = dataclasses.replace(rows, blocks=())
+        return log, core, rows, reduction
 
     if workers <= 1:
         for job in stream.jobs():
@@ -231,7 +242,8 @@ def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, f
     labels: set[str] = set()
     n_samples = 0
     try:
-        for log, core, rows, reduction in _reduced_logs(logs, geometry, settings, len(p_fixed), order, workers):
+        for log, core, rows, reduction in _reduced_logs(logs, geometry, settings, len(p_fixed), order, workers,
+                                                        reuse=not keep_blocks):
             merge_reduction(reduction, stats, store, names)
             if keep_blocks:
                 blocks += rows.blocks

@@ -29,6 +29,7 @@ from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
+from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, _constant_model, max_virtual_angle, nominal_steering
 from agvdyn.platform import Geometry
 from agvdyn.signals import row_max_abs, runs
@@ -193,17 +194,18 @@ def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndar
 
 
 def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.ndarray, usable: np.ndarray,
-                    labels: _Labels | None, settings: IdentificationSettings, recording: str, mine: np.ndarray
-                    ) -> list[EquationBlock]:
+                    labels: _Labels | None, settings: IdentificationSettings, recording: str, mine: np.ndarray,
+                    workspace: Workspace | None = None, tag: str = "") -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there). The rows of all
     runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views."""
     guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
     tables = _tables(geometry, settings)
     n = st.n
-    Y, tau, s_dot = np.empty((n, 2, 11)), np.empty((n, 2)), np.empty((n, 2))
-    keep, offsets = np.empty((n, 2), dtype=bool), np.empty((n, 2, 4))
-    runs_found = np.empty((n, 2), dtype=np.int64)
+    Y, tau = empty(workspace, f"Y{tag}", (n, 2, 11)), empty(workspace, f"tau{tag}", (n, 2))
+    s_dot, keep = empty(workspace, f"s_dot{tag}", (n, 2)), empty(workspace, f"keep{tag}", (n, 2), bool)
+    offsets = empty(workspace, f"offsets{tag}", (n, 2, 4))
+    runs_found = empty(workspace, f"runs{tag}", (n, 2), np.int64)
     count = stretch_projection(mode, av, st.q_dot, st.signals, st.torque, tables.h, tables.pinv, tables.dof, tables.thresholds,
                                usable, mine, guard, geometry.l, geometry.b, geometry.a, geometry.r,
                                max_virtual_angle(geometry), geometry.i_G, Y, tau, s_dot, keep, offsets, runs_found)
@@ -225,11 +227,13 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
 
 
 def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings(),
-             core: slice | None = None) -> LogRows:
+             core: slice | None = None, workspace: Workspace | None = None) -> LogRows:
     """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped.
 
     ``core``: for a piece of a longer log (:func:`agvdyn.io.chunks.log_pieces`), the rows that are
     its own; the others (its neighbours' overlap) are filtered but neither used nor counted.
+    ``workspace``: buffers reused from the previous log; the blocks are then views valid only
+    until the next log that uses it (see :mod:`.workspace`).
     """
     source = log_source(log)
     t, alpha, beta = log.t, log.alpha, log.beta
@@ -249,7 +253,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             notes.append(f"{source}: rows {a}..{b - 1} ({b - a} samples) skipped: a continuous stretch needs more "
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
-        st = filtered_stretch(geometry, log, a, b, settings)
+        st = filtered_stretch(geometry, log, a, b, settings, workspace, f"#{len(stretches)}")
         mode, av = _modes_and_virtual_angle(geometry, st, settings)
         stretches.append((st, av))
         modes[a:b] = mode
@@ -284,7 +288,8 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & mine & (mode == m)))
         if labels is not None:
             _count_mismatch(counts, labels, st.rows, mode)
-        blocks += _stretch_blocks(geometry, st, mode, av, usable, labels, settings, f"{source}#{k}", mine)
+        blocks += _stretch_blocks(geometry, st, mode, av, usable, labels, settings, f"{source}#{k}", mine,
+                                  workspace, f"#{k}")
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
 
 

@@ -16,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from agvdyn._zero_phase import filtfilt_in_place, padded_buffer
+from agvdyn._zero_phase import filtfilt_in_place
 from agvdyn.identification._kernels import SIGNAL_CHANNELS, stretch_motion
 from agvdyn.identification.settings import Filtering, IdentificationSettings
+from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.platform import Geometry
 from agvdyn.signals import filter_design, lowpass, row_max_abs, uniform_sample_time
 
@@ -144,13 +145,16 @@ def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings:
     return list(zip(starts.tolist(), stops.tolist())), reasons
 
 
-def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings
-                     ) -> Stretch:
+def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
+                     workspace: Workspace | None = None, tag: str = "") -> Stretch:
     """Filter, differentiate and evaluate one stretch ``[start, stop)`` of a log once.
 
     The angles are low-passed in one compiled pass, then :func:`._kernels.stretch_motion` takes
     derivatives, odometry (eq. 3), slip speeds, the entries of Theta and the aligned torques in one
     pass, written straight into the buffer of the second filter (PARALLEL: all 25 channels).
+
+    ``workspace``: buffers reused from the previous log (``tag`` tells this stretch's apart from
+    the log's others); the arrays are then valid until the next log.
 
     Raises ValueError (naming source and rows) when the stretch is not uniformly sampled or is
     too short for the zero-phase filter.
@@ -164,13 +168,14 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     sos, zi, pad = filter_design(dt, settings.filter)
     if n <= pad:
         raise ValueError(f"{where}: signal of {n} samples is too short for the zero-phase filter: needs more than {pad}")
-    angles = padded_buffer(n, 6, pad)
+    angles = empty(workspace, f"angles{tag}", (n + 2 * pad, 6))
     angles[pad:pad + n, :2] = log.alpha[sl]
     angles[pad:pad + n, 2:] = log.beta[sl]
     f = filtfilt_in_place(sos, zi, angles, pad)
-    alpha, trig, slip = np.empty((n, 2)), np.empty((n, 4)), np.empty((n, 4))
-    q_dot, q_ddot = np.empty((n, 9)), np.empty((n, 9))
-    both = padded_buffer(n, SIGNAL_CHANNELS, pad)
+    alpha, trig = empty(workspace, f"alpha{tag}", (n, 2)), empty(workspace, f"trig{tag}", (n, 4))
+    slip = empty(workspace, f"slip{tag}", (n, 4))
+    q_dot, q_ddot = empty(workspace, f"q_dot{tag}", (n, 9)), empty(workspace, f"q_ddot{tag}", (n, 9))
+    both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS))
     middle = both[pad:pad + n]
     torque = np.ascontiguousarray(log.torque[sl], dtype=float)
     stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,

@@ -369,7 +369,11 @@ def write_log(
             raise TypeError(f"sidecar: expected a dict, got {type(sidecar).__name__}")
         side_text = yaml.safe_dump(_plain(sidecar), sort_keys=False)
     if suffix == ".parquet":
-        write_atomically(path, lambda tmp: checked.to_parquet(tmp, index=False))
+        # floats plain and uncompressed (noisy samples hardly compress: +15 % size, half the read time),
+        # the segment labels dictionary-encoded
+        segment = [SEGMENT_COLUMN] if SEGMENT_COLUMN in checked.columns else False
+        write_atomically(path, lambda tmp: checked.to_parquet(tmp, index=False, compression=None,
+                                                              use_dictionary=segment))
     else:
         write_atomically(path, lambda tmp: checked.to_csv(tmp, index=False))
     side = sidecar_path(path)
