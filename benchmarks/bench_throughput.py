@@ -1,19 +1,27 @@
 """Throughput and memory of ``identify`` on many logs (issue 12): samples per second of work and
-peak RSS for 1, 25 and 100 copies of one simulated identification log (117.6 s, 58,804 samples), each in a fresh process,
-next to the vectorised row-stacked reference and a naive per-sample loop measured in the same run,
-and the ``agvdyn identify`` command as a user meets it (start-up included).
+peak RSS for 1, 25 and 100 copies of one simulated log, each in a fresh process, next to the
+vectorised row-stacked reference and a naive per-sample loop measured in the same run, and the
+``agvdyn identify`` command as a user meets it (start-up included).
 
-    .venv/bin/python benchmarks/bench_throughput.py [--copies 1 25 100] [--seconds 71]
+    .venv/bin/python benchmarks/bench_throughput.py [--copies 1 25 100] [--experiment 71s|identification]
 
+* The log (acceptance case, default ``71s``): the identification sequence with one steering period
+  and 23 s straight and rotation segments, simulated (seed 1) and cut to its first 71.0 s
+  (35,500 samples at 500 Hz); 25 copies are 887,500 samples. ``identification``: the whole
+  117.6 s default sequence (58,804 samples).
 * ``normal equations``: :func:`agvdyn.identification.identify` with ``keep_blocks=False``, logs read
-  one at a time and reduced to Gram blocks (what ``agvdyn identify`` and ``agvdyn batch`` run).
+  and reduced to Gram blocks (what ``agvdyn identify`` and ``agvdyn batch`` run), with
+  ``workers=1`` (one core) and ``workers=2`` (two threads); the rate is samples / wall time of
+  work (start-up and a warm-up identification excluded), and samples / CPU time of the process
+  (the machine may be shared).
 * ``stacked reference``: every log's equation blocks kept and all rows stacked in memory
-  (``fit_blocks(..., stacked=True)``), the previous design.
+  (``fit_blocks(..., stacked=True)``), the previous design; the largest relative difference of
+  the ten parameters and four offsets against it is printed.
 * ``naive``: rows of eq. (19) built one sample at a time in Python (``bench_identification.naive_rows``)
   on a subset, extrapolated linearly.
 
 Targets: >= 2 M samples/s of work for 25 copies, peak RSS <= 600 MB, 100 copies no more than
-100 MB above 25. One core: BLAS and numba threads are pinned to 1.
+100 MB above 25. BLAS and numba threads are pinned to 1.
 """
 from __future__ import annotations
 
@@ -24,6 +32,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import resource  # noqa: E402
 import shutil  # noqa: E402
 import subprocess  # noqa: E402
@@ -37,15 +46,15 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def worker(paths: list[str], mode: str) -> dict:
+def worker(paths: list[str], mode: str, workers: int) -> dict:
     """Runs in a fresh process: one warm-up identification (imports, numba cache), then the timed one."""
     from agvdyn.identification import IdentificationSettings, fit_blocks, identify, load_logs, platform_for
     from agvdyn.identification.rows import log_rows
 
-    identify(paths[:1], keep_blocks=False)
-    t0 = time.perf_counter()
+    identify(paths[:2], keep_blocks=False, workers=workers)
+    t0, c0 = time.perf_counter(), time.process_time()
     if mode == "normal":
-        ident = identify(paths, keep_blocks=False)
+        ident = identify(paths, keep_blocks=False, workers=workers)
     else:  # the row-stacked reference: all blocks in memory, one stacked regression
         settings = IdentificationSettings()
         logs = load_logs(paths)
@@ -53,22 +62,47 @@ def worker(paths: list[str], mode: str) -> dict:
         blocks = [b for log in logs for b in log_rows(log, geometry, settings).blocks]
         ident = fit_blocks(blocks, geometry, settings=settings, stacked=True,
                            n_samples=sum(len(log.t) for log in logs))
-    seconds = time.perf_counter() - t0
-    return {"samples": ident.n_samples, "seconds": seconds, "peak_mb": _peak_mb(),
-            "m_ch": ident.parameters.m_ch}
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    values = list(ident.parameters.to_vector()) + list(ident.offsets.values())
+    return {"samples": ident.n_samples, "seconds": seconds, "cpu": cpu, "peak_mb": _peak_mb(), "values": values}
 
 
-def _run_worker(paths: list[Path], mode: str) -> dict:
+def _run_worker(paths: list[Path], mode: str, workers: int = 1) -> dict:
     with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
         json.dump([str(p) for p in paths], f)
     try:
-        out = subprocess.run([sys.executable, __file__, "--worker", f.name, "--mode", mode],
+        out = subprocess.run([sys.executable, __file__, "--worker", f.name, "--mode", mode, "--workers", str(workers)],
                              capture_output=True, text=True)
     finally:
         os.unlink(f.name)
     if out.returncode:
         raise SystemExit(f"worker ({mode}, {len(paths)} logs) failed:\n{out.stderr}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _max_relative_difference(a: list[float], b: list[float]) -> float:
+    return max(abs(x / y - 1) if y else abs(x) for x, y in zip(a, b))
+
+
+def acceptance_log(folder: Path) -> Path:
+    """The 71 s log of the acceptance case (see the module docstring), written to ``folder``."""
+    from agvdyn.io import read_log, write_log  # noqa: PLC0415
+    from agvdyn.simulation import simulate  # noqa: PLC0415
+    from agvdyn.trajectories import FourierSeries, default_excitation, identification_sequence  # noqa: PLC0415
+
+    def shorter(name: str, period: float) -> FourierSeries:  # same velocity shape, shorter period
+        series = default_excitation(name)
+        return FourierSeries(2 * math.pi / period, series.a, series.b, series.start)
+
+    traj = identification_sequence(steering_periods=1, straight=shorter("straight", 23.0),
+                                   rotation=shorter("rotation", 23.0))
+    whole = read_log(simulate(traj, seed=1).write(folder / "whole71.parquet"))
+    frame = whole.frame.iloc[:ACCEPTANCE_SAMPLES].reset_index(drop=True)
+    return write_log(folder / "log71.parquet", frame, whole.sidecar)
+
+
+#: Samples of the acceptance log: 71 s at 500 Hz.
+ACCEPTANCE_SAMPLES = 35_500
 
 
 def _naive_rate(path: Path, n_per_segment: int = 1000) -> float:
@@ -99,47 +133,49 @@ def _cli_wall(paths: list[Path], out: Path) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="+", default=[1, 25, 100])
-    parser.add_argument("--seconds", type=float, default=0.0,
-                        help="cut the simulated identification log to its first SECONDS (default 0: the whole "
-                             "117.6 s sequence; its rotation phase starts after 71 s)")
+    parser.add_argument("--experiment", choices=("71s", "identification"), default="71s",
+                        help="the 71 s acceptance log (default) or the whole 117.6 s identification sequence")
     parser.add_argument("--log", type=Path, help="use this log instead of simulating one")
+    parser.add_argument("--threads", type=int, default=2, help="workers of the threaded run (default 2)")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--mode", default="normal", help=argparse.SUPPRESS)
+    parser.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        print(json.dumps(worker(json.loads(Path(args.worker).read_text()), args.mode)))
+        print(json.dumps(worker(json.loads(Path(args.worker).read_text()), args.mode, args.workers)))
         return
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         source = args.log
-        if source is None:
-            from agvdyn.io import read_log, write_log  # noqa: PLC0415
+        if source is None and args.experiment == "71s":
+            source = acceptance_log(tmp)
+        elif source is None:
             from agvdyn.simulation import simulate  # noqa: PLC0415
 
             source = simulate("identification", seed=1).write(tmp / "log.parquet")
-            if args.seconds > 0:
-                log = read_log(source)
-                frame = log.frame[log.frame["t"] <= log.frame["t"].iloc[0] + args.seconds]
-                source = write_log(tmp / "cut.parquet", frame, log.sidecar)
         for k in range(max(args.copies)):
             shutil.copy(source, tmp / f"copy{k:03d}.parquet")
             if Path(f"{source}.yaml").exists():
                 shutil.copy(f"{source}.yaml", tmp / f"copy{k:03d}.parquet.yaml")
         copies = sorted(tmp.glob("copy*.parquet"))
-        print(f"log: {source.name}; one core")
+        print(f"log: {source.name}; {os.cpu_count()} cores; load average {os.getloadavg()[0]:.1f} at the start")
         print(f"naive per-sample loop: {_naive_rate(source) / 1e3:.1f} k samples/s")
         base_rss = None
         for n in args.copies:
             paths = copies[:n]
-            fast = _run_worker(paths, "normal")
+            runs = {w: _run_worker(paths, "normal", w) for w in sorted({1, args.threads})}
             ref = _run_worker(paths, "stacked") if n <= 25 else None
-            rate = fast["samples"] / fast["seconds"]
-            line = (f"{n:4d} logs, {fast['samples']:,} samples: {rate / 1e6:.2f} M samples/s of work, "
-                    f"peak RSS {fast['peak_mb']:.0f} MB")
+            for w, fast in runs.items():
+                rate, cpu_rate = fast["samples"] / fast["seconds"], fast["samples"] / fast["cpu"]
+                print(f"{n:4d} logs, {fast['samples']:,} samples, workers={w}: {rate / 1e6:.2f} M samples/s of work "
+                      f"({fast['seconds']:.2f} s; {cpu_rate / 1e6:.2f} M samples per CPU second), "
+                      f"peak RSS {fast['peak_mb']:.0f} MB")
             if ref is not None:
-                line += (f" | stacked reference {ref['samples'] / ref['seconds'] / 1e6:.2f} M samples/s, "
-                         f"peak RSS {ref['peak_mb']:.0f} MB, m_ch equal to {abs(ref['m_ch'] / fast['m_ch'] - 1):.1e}")
-            print(line)
+                diff = max(_max_relative_difference(f["values"], ref["values"]) for f in runs.values())
+                print(f"      stacked reference {ref['samples'] / ref['seconds'] / 1e6:.2f} M samples/s "
+                      f"({ref['samples'] / ref['cpu'] / 1e6:.2f} per CPU second), peak RSS {ref['peak_mb']:.0f} MB; "
+                      f"parameters and offsets equal to {diff:.1e} (relative)")
+            fast = runs[1]
             if n == 25:
                 base_rss = fast["peak_mb"]
             elif n > 25 and base_rss is not None:
