@@ -53,14 +53,14 @@ def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.P
 
 def platform_for(logs: Sequence[Any], platform: Geometry | str | os.PathLike | None) -> Geometry:
     """The geometry to use: the one given, else the ``platform`` of the first log's sidecar, else PROTOTYPE."""
-    from agvdyn.io import sidecar_platform
+    from agvdyn.io import Log, sidecar_platform
 
     if isinstance(platform, Geometry):
         return platform
     if platform is not None:
         return read_platform(platform)
     for log in logs:
-        if getattr(log, "sidecar", None):
+        if isinstance(log, Log) or getattr(log, "sidecar", None):  # a Log's sidecar is read on demand
             found = sidecar_platform(log)
             if found is not None:
                 return found

@@ -92,8 +92,9 @@ def torque_lead(log: Any, settings: IdentificationSettings) -> float:
     ``torque_lead`` (``agvdyn.simulation`` writes 0.5), else 0."""
     if settings.torque_lead is not None:
         return float(settings.torque_lead)
-    sidecar = getattr(log, "sidecar", None)
-    value = sidecar.get("torque_lead") if isinstance(sidecar, dict) else None
+    from agvdyn.io.log import sidecar_value
+
+    value = sidecar_value(log, "torque_lead")
     if value is None:
         return 0.0
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:

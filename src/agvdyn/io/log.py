@@ -17,6 +17,7 @@ import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
+from agvdyn.io.sidecar import LazySidecar, sidecar_text
 from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LOG_COLUMNS,
     ALPHA_COLUMNS,
@@ -74,6 +75,13 @@ class Log:
     def __post_init__(self) -> None:
         # Always both alpha columns, as plain ints (a partial or empty dict counts zeros).
         object.__setattr__(self, "clipped", {c: int(dict(self.clipped or {}).get(c, 0)) for c in ALPHA_COLUMNS})
+
+    def __getattribute__(self, name: str) -> Any:
+        value = object.__getattribute__(self, name)
+        if name == "sidecar" and type(value) is LazySidecar:  # read_log keeps a plain sidecar as text
+            value = value.parse()
+            object.__setattr__(self, "sidecar", value)
+        return value
 
     @classmethod
     def from_frame(
@@ -204,19 +212,18 @@ def _log_suffix(path: Path) -> str:
 
 def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
     """Contents of the YAML sidecar ``<path>.yaml`` of a log, ``{}`` when there is none."""
-    side = sidecar_path(path)
-    if not side.exists():
-        return {}
-    try:
-        # libyaml's parser when PyYAML has it: sidecars carry the trajectory, ~10x faster
-        data = yaml.load(side.read_text(encoding="utf-8"), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
-    except yaml.YAMLError as exc:
-        raise LogError(f"{side}: sidecar is not valid YAML: {exc}") from exc
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise LogError(f"{side}: sidecar must hold a mapping at the top level, found {type(data).__name__}")
-    return data
+    data = sidecar_text(sidecar_path(path))
+    return data.parse() if isinstance(data, LazySidecar) else data
+
+
+def sidecar_value(log: Any, key: str, default: Any = None) -> Any:
+    """The top-level entry ``key`` of a log's sidecar (``default`` without one), without parsing the
+    rest of a sidecar :func:`read_log` kept as text."""
+    raw = getattr(log, "__dict__", {}).get("sidecar")
+    if isinstance(raw, LazySidecar):
+        return raw.get(key, default)
+    sidecar = getattr(log, "sidecar", None)
+    return sidecar.get(key, default) if isinstance(sidecar, dict) else default
 
 
 def read_table(path: Path) -> pd.DataFrame:
@@ -260,7 +267,7 @@ def read_log(
     if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
         checked, clipped, block = checked_columns(*columns, path, max_gap_samples=max_gap_samples,
                                                   stop_tolerance=stop_tolerance)
-        log = Log(path, checked, read_sidecar(path), clipped)
+        log = Log(path, checked, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
         object.__setattr__(log, "_block", block)
         return log
     frame = read_table(path)
@@ -308,7 +315,7 @@ def sidecar_platform(log: Log) -> Geometry | None:
     LogError
         The sidecar has a ``platform`` entry that is not a valid geometry.
     """
-    data = log.sidecar.get("platform") if isinstance(log.sidecar, dict) else None
+    data = sidecar_value(log, "platform")
     if data is None:
         return None
     where = sidecar_path(log.path) if log.path is not None else "sidecar"
