@@ -22,7 +22,7 @@ import numpy as np
 
 from agvdyn.kinematics import car_like_model_into, icr_state_trig
 
-__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "SIGNAL_CHANNELS"]
+__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
@@ -323,3 +323,27 @@ def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_
                 by_key[dest, p] = out[k, p]
             k += 1
     return k
+
+
+@numba.njit(cache=True, nogil=True)
+def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step, kind):  # pragma: no cover
+    """Where a log's recording is not continuous: ``kind[i]`` (n - 1,) is 1 for a time step above
+    ``max_step``, else 2 for a steering angle step above ``max_steering_step``, else 3 for a wheel
+    angle step above ``max_wheel_step``, else 0. Returns the number of breaks."""
+    count = 0
+    for i in range(t.shape[0] - 1):
+        k = 0
+        if t[i + 1] - t[i] > max_step:
+            k = 1
+        else:
+            for c in range(alpha.shape[1]):
+                if abs(alpha[i + 1, c] - alpha[i, c]) > max_steering_step:
+                    k = 2
+            if k == 0:
+                for c in range(beta.shape[1]):
+                    if abs(beta[i + 1, c] - beta[i, c]) > max_wheel_step:
+                        k = 3
+        kind[i] = k
+        if k:
+            count += 1
+    return count

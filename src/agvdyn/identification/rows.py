@@ -28,7 +28,7 @@ from agvdyn.identification._kernels import stretch_modes, stretch_projection
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
-from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretch_bounds
+from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretches_of
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, _constant_model, max_virtual_angle, nominal_steering
 from agvdyn.platform import Geometry
@@ -153,6 +153,17 @@ class _Labels:
 
     @classmethod
     def of(cls, log: Any) -> "_Labels | None":
+        """The labels of a log (kept on an agvdyn.io.Log: its frame is read only)."""
+        cache = getattr(log, "__dict__", None)
+        if cache is not None and "_labels" in cache:
+            return cache["_labels"]
+        labels = cls._of(log)
+        if cache is not None and hasattr(log, "frame"):
+            cache["_labels"] = labels
+        return labels
+
+    @classmethod
+    def _of(cls, log: Any) -> "_Labels | None":
         frame = getattr(log, "frame", None)
         column = None if frame is None or "segment" not in frame.columns else frame["segment"]
         if column is not None and isinstance(column.dtype, pd.CategoricalDtype):  # our logs: no string pass
@@ -243,9 +254,9 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         own[:] = False
         own[core] = True
     counts = RowCounts(samples=int(own.sum()), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
-    bounds, notes = stretch_bounds(t, alpha, beta, settings)
+    bounds, notes, nominal = stretches_of(t, alpha, beta, settings)
     notes = [f"{source}: {n}" for n in notes]
-    min_rows = min_stretch_rows(settings, float(np.median(np.diff(t))))
+    min_rows = min_stretch_rows(settings, nominal)
     stretches, modes = [], np.zeros(t.size, dtype=np.int8)
     for a, b in bounds:
         if b - a <= min_rows:

@@ -17,13 +17,13 @@ from typing import Any
 import numpy as np
 
 from agvdyn._zero_phase import filtfilt_in_place
-from agvdyn.identification._kernels import SIGNAL_CHANNELS, stretch_motion
+from agvdyn.identification._kernels import SIGNAL_CHANNELS, recording_breaks, stretch_motion
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.platform import Geometry
 from agvdyn.signals import filter_design, lowpass, row_max_abs, uniform_sample_time
 
-__all__ = ["Stretch", "stretch_bounds", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
+__all__ = ["Stretch", "stretch_bounds", "stretches_of", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
            "torque_lead", "align_torque"]
 
 
@@ -128,22 +128,28 @@ def min_stretch_rows(settings: IdentificationSettings, dt: float) -> int:
 def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings
                    ) -> tuple[list[tuple[int, int]], list[str]]:
     """Half-open row ranges of the continuous stretches of a log, and why each cut was made."""
-    steps = np.diff(t)
-    if steps.size == 0:
-        return [(0, t.size)], []
-    nominal = float(np.median(steps))
-    gap = steps > settings.stretch_gap * nominal
-    steer = row_max_abs(np.diff(alpha, axis=0)) > settings.steering_jump_rate * nominal
-    wheel = row_max_abs(np.diff(beta, axis=0)) > settings.wheel_jump_rate * nominal
-    cuts = np.flatnonzero(gap | steer | wheel)
+    bounds, reasons, _ = stretches_of(t, alpha, beta, settings)
+    return bounds, reasons
+
+
+def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings
+                 ) -> tuple[list[tuple[int, int]], list[str], float]:
+    """:func:`stretch_bounds` and the nominal (median) time step of the log (NaN for one sample)."""
+    if t.size < 2:
+        return [(0, t.size)], [], math.nan
+    nominal = float(np.median(np.diff(t)))
+    kind = np.empty(t.size - 1, dtype=np.int8)
+    found = recording_breaks(t, alpha, beta, settings.stretch_gap * nominal, settings.steering_jump_rate * nominal,
+                             settings.wheel_jump_rate * nominal, kind)
+    cuts = np.flatnonzero(kind) if found else np.zeros(0, dtype=np.int64)
     reasons = []
     for i in cuts:
-        what = (f"a dropout of {steps[i]:.4g} s" if gap[i] else
-                "a steering angle jump" if steer[i] else "a wheel angle jump")
+        what = (f"a dropout of {t[i + 1] - t[i]:.4g} s" if kind[i] == 1 else
+                "a steering angle jump" if kind[i] == 2 else "a wheel angle jump")
         reasons.append(f"cut between t = {t[i]:.6g} s and {t[i + 1]:.6g} s: {what}")
     starts = np.concatenate([[0], cuts + 1])
     stops = np.concatenate([cuts + 1, [t.size]])
-    return list(zip(starts.tolist(), stops.tolist())), reasons
+    return list(zip(starts.tolist(), stops.tolist())), reasons, nominal
 
 
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
