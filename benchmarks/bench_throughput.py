@@ -51,7 +51,20 @@ def worker(paths: list[str], mode: str, workers: int) -> dict:
     from agvdyn.identification import IdentificationSettings, fit_blocks, identify, load_logs, platform_for
     from agvdyn.identification.rows import log_rows
 
+    import agvdyn.identification.pipeline as pipeline
+
     identify(paths[:2], keep_blocks=False, workers=workers)
+    regression = [0.0]
+    fit = pipeline.fit_regression
+
+    def timed_fit(*args, **kwargs):  # the regression stage's share (estimator, uncertainty, checks)
+        start = time.perf_counter()
+        try:
+            return fit(*args, **kwargs)
+        finally:
+            regression[0] += time.perf_counter() - start
+
+    pipeline.fit_regression = timed_fit
     t0, c0 = time.perf_counter(), time.process_time()
     if mode == "normal":
         ident = identify(paths, keep_blocks=False, workers=workers)
@@ -64,7 +77,8 @@ def worker(paths: list[str], mode: str, workers: int) -> dict:
                            n_samples=sum(len(log.t) for log in logs))
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     values = list(ident.parameters.to_vector()) + list(ident.offsets.values())
-    return {"samples": ident.n_samples, "seconds": seconds, "cpu": cpu, "peak_mb": _peak_mb(), "values": values}
+    return {"samples": ident.n_samples, "seconds": seconds, "cpu": cpu, "peak_mb": _peak_mb(), "values": values,
+            "regression": regression[0]}
 
 
 def _run_worker(paths: list[Path], mode: str, workers: int = 1) -> dict:
@@ -168,8 +182,8 @@ def main() -> None:
             for w, fast in runs.items():
                 rate, cpu_rate = fast["samples"] / fast["seconds"], fast["samples"] / fast["cpu"]
                 print(f"{n:4d} logs, {fast['samples']:,} samples, workers={w}: {rate / 1e6:.2f} M samples/s of work "
-                      f"({fast['seconds']:.2f} s; {cpu_rate / 1e6:.2f} M samples per CPU second), "
-                      f"peak RSS {fast['peak_mb']:.0f} MB")
+                      f"({fast['seconds']:.2f} s, of which the regression stage {fast['regression']:.2f} s; "
+                      f"{cpu_rate / 1e6:.2f} M samples per CPU second), peak RSS {fast['peak_mb']:.0f} MB")
             if ref is not None:
                 diff = max(_max_relative_difference(f["values"], ref["values"]) for f in runs.values())
                 print(f"      stacked reference {ref['samples'] / ref['seconds'] / 1e6:.2f} M samples/s "

@@ -66,7 +66,7 @@ class RowStore:
     :meth:`add_packed` takes rows as they come from :func:`row_statistics`, one ``[A | y]`` block
     (views are kept as they are: no copy; a spilled block is written as one plain array)."""
 
-    def __init__(self, budget: int = 64 << 20, columns: Sequence[int] | None = None) -> None:
+    def __init__(self, budget: int = 128 << 20, columns: Sequence[int] | None = None) -> None:
         self.budget = budget
         #: natural column of each stored column of A (None: as given); see :meth:`free_rows`
         self.columns = None if columns is None else np.asarray(columns, dtype=np.int64)
@@ -75,6 +75,7 @@ class RowStore:
         self._folder: Path | None = None
         self._cleanup: weakref.finalize | None = None
         self._keys = True
+        self._spans: list[int] = []
 
     def add(self, rows: RecordingRows) -> None:
         A = rows.A if self.columns is None else rows.A[:, self.columns]
@@ -84,6 +85,7 @@ class RowStore:
         """Rows ``[A | y]`` (m, w + 1) of one recording (A's columns in the order of ``columns``)
         with their coordinate codes, steps and keys."""
         self._keys = self._keys and key is not None
+        self._spans.append(int(step.max() - step.min()) + 1 if step.size else 0)
         size = sum(x.nbytes for x in (rows, group, step, key) if x is not None)
         if self._bytes + size <= self.budget:
             self._items.append(_Packed(rows, group, step, key))
@@ -134,6 +136,10 @@ class RowStore:
                 y = y - p.rows[:, held] @ values
             A = p.rows[:, :len(free)] if first else p.rows[:, where]
             yield RecordingRows(A, y, p.group, p.step, p.key)
+
+    def lengths(self) -> list[int]:
+        """Steps each recording spans (last minus first step plus one), without reading rows back."""
+        return list(self._spans)
 
     @property
     def keys(self) -> bool:

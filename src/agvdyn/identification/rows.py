@@ -189,19 +189,16 @@ def labels_present(log: Any) -> set[str]:
 
 
 def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndarray) -> None:
-    codes = labels.codes[sl]
+    """Rows whose label names an experiment of other modes than the row's, per label."""
+    width = len(Mode) + 1
+    table = np.bincount(labels.codes[sl] * width + mode, minlength=len(labels.names) * width).reshape(-1, width)
     for code, name in enumerate(labels.names):
         expected = LABEL_MODES.get(name)
         if expected is None:
             continue
-        rows = codes == code
-        if rows.any():
-            ok = np.zeros_like(rows)
-            for m in expected:
-                ok |= mode == int(m)
-            off = int(np.count_nonzero(rows & ~ok))
-            if off:
-                counts.label_mismatch[name] = counts.label_mismatch.get(name, 0) + off
+        off = int(table[code].sum() - sum(int(table[code, int(m)]) for m in expected))
+        if off:
+            counts.label_mismatch[name] = counts.label_mismatch.get(name, 0) + off
 
 
 def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.ndarray, usable: np.ndarray,
@@ -294,9 +291,10 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         counts.slip += int(np.count_nonzero(rest & drop_slip & mine))
         usable = rest & ~drop_slip
         counts.used += int(np.count_nonzero(usable & mine))
-        for m in np.unique(mode[usable & mine]):
-            label = Mode(int(m)).label
-            counts.per_mode[label] = counts.per_mode.get(label, 0) + int(np.count_nonzero(usable & mine & (mode == m)))
+        for m, c in enumerate(np.bincount(mode[usable & mine], minlength=len(Mode) + 1).tolist()):
+            if c and m != NO_MODE:
+                label = Mode(m).label
+                counts.per_mode[label] = counts.per_mode.get(label, 0) + c
         if labels is not None:
             _count_mismatch(counts, labels, st.rows, mode)
         blocks += _stretch_blocks(geometry, st, mode, av, usable, labels, settings, f"{source}#{k}", mine,
