@@ -61,7 +61,7 @@ def _turn_series(geom: Geometry, sign: float, stop_margin: float) -> tuple[Fouri
     return (FourierSeries(w, tuple(sign * x for x in sa.a), tuple(sign * x for x in sa.b), sign * c), sx)
 
 
-def _times(series: FourierSeries, factor: float) -> FourierSeries:
+def _scaled_by(series: FourierSeries, factor: float) -> FourierSeries:
     return FourierSeries(series.base_frequency, tuple(np.array(series.a) * factor),
                          tuple(np.array(series.b) * factor), series.start)
 
@@ -108,6 +108,6 @@ def car_like_experiment(geom: Geometry = PROTOTYPE, *, rotation_periods: int = 2
         worst = min(margin * report.limits[k] / report.peaks[k] for k in report.peaks if report.peaks[k] > 0)
         if worst >= 1:
             return traj
-        travel = _times(travel, worst * 0.99)
+        travel = _scaled_by(travel, worst * 0.99)
     raise TrajectoryError(f"car-like experiment: the turns do not fit within {margin:g} of the limits "
                           f"({report.peaks}): expected wider limits")
