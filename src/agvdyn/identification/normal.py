@@ -28,8 +28,8 @@ from agvdyn.identification._kernels import kept_rows
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.workspace import Workspace, empty
 
-#: Rows per QR of a tall-skinny factorization (per-call overhead dominates at 11-16 columns).
-_QR_ROWS = 8192
+#: Rows per QR of a tall-skinny factorization.
+_QR_ROWS = 2048
 
 __all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "LogReduction", "row_statistics",
            "reduce_blocks", "merge_reduction", "regression_data", "stacked_regression_data", "triangular_rows"]
