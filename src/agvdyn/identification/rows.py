@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from agvdyn.identification._kernels import stretch_modes, stretch_projection
+from agvdyn.io.schema import SEGMENTS, LazyFrame
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
@@ -158,12 +159,17 @@ class _Labels:
         if cache is not None and "_labels" in cache:
             return cache["_labels"]
         labels = cls._of(log)
-        if cache is not None and hasattr(log, "frame"):
+        if cache is not None and "frame" in cache:
             cache["_labels"] = labels
         return labels
 
     @classmethod
     def _of(cls, log: Any) -> "_Labels | None":
+        raw = getattr(log, "__dict__", {}).get("frame")
+        if isinstance(raw, LazyFrame):  # read by read_log: codes into SEGMENTS, no DataFrame needed
+            if raw.segment_codes is None:
+                return None
+            return cls(("", *SEGMENTS), raw.segment_codes.astype(np.int32) + 1)
         frame = getattr(log, "frame", None)
         column = None if frame is None or "segment" not in frame.columns else frame["segment"]
         if column is not None and isinstance(column.dtype, pd.CategoricalDtype):  # our logs: no string pass

@@ -34,6 +34,7 @@ from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LOG_SUFFIXES,
     LogError,
     SegmentRun,
+    LazyFrame,
     check_frame,
     checked_columns,
     sample_time_error,
@@ -81,6 +82,9 @@ class Log:
         if name == "sidecar" and type(value) is LazySidecar:  # read_log keeps a plain sidecar as text
             value = value.parse()
             object.__setattr__(self, "sidecar", value)
+        elif name == "frame" and type(value) is LazyFrame:  # and our Parquet's columns as numpy arrays
+            value = value.frame()
+            object.__setattr__(self, "frame", value)
         return value
 
     @classmethod
@@ -142,7 +146,7 @@ class Log:
 
     @property
     def n_samples(self) -> int:
-        return len(self.frame)
+        return len(self.t)
 
     @cached_property
     def sample_time(self) -> float:
@@ -265,10 +269,9 @@ def read_log(
     path = Path(path)
     columns = _our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
     if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
-        checked, clipped, block = checked_columns(*columns, path, max_gap_samples=max_gap_samples,
-                                                  stop_tolerance=stop_tolerance)
-        log = Log(path, checked, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
-        object.__setattr__(log, "_block", block)
+        lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
+        log = Log(path, lazy, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
+        object.__setattr__(log, "_block", lazy.block)
         return log
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,

@@ -199,6 +199,22 @@ def _check(
     return out, clipped
 
 
+@dataclass(frozen=True, eq=False)
+class LazyFrame:
+    """A checked log's columns before they are made a DataFrame (``Log.frame`` makes it on first
+    use): ``block`` (N, 11) float64 in :data:`LOG_COLUMNS` order, read only; ``segment_codes``
+    (N,) codes into :data:`SEGMENTS` (-1: no segment), None without a segment column."""
+
+    block: np.ndarray
+    segment_codes: np.ndarray | None
+
+    def frame(self) -> pd.DataFrame:
+        out = pd.DataFrame(self.block, columns=list(LOG_COLUMNS), copy=False)
+        if self.segment_codes is not None:
+            out[SEGMENT_COLUMN] = pd.Categorical.from_codes(self.segment_codes, categories=list(SEGMENTS))
+        return out
+
+
 def checked_columns(
     columns: dict[str, np.ndarray],
     segment: tuple[list[str | None], np.ndarray] | None,
@@ -206,11 +222,11 @@ def checked_columns(
     *,
     max_gap_samples: float,
     stop_tolerance: float,
-) -> tuple[pd.DataFrame, dict[str, int], np.ndarray]:
+) -> tuple[LazyFrame, dict[str, int]]:
     """The checks of :func:`check_frame` on columns read straight from a file in our schema:
     ``columns`` float64 arrays of every name in :data:`LOG_COLUMNS`, ``segment`` (category names
-    or None for missing, int codes with -1 missing) or None. Returns the frame, the clipped rows
-    and the float block (N, 11) in :data:`LOG_COLUMNS` order that the frame's columns view."""
+    or None for missing, int codes with -1 missing) or None. Returns the checked columns (made a
+    DataFrame only when one is asked for) and the clipped rows."""
     source = str(source)
     _check_options(max_gap_samples, stop_tolerance, MAX_SAMPLE_TIME)
     n = columns[LOG_COLUMNS[0]].shape[0]
@@ -221,11 +237,9 @@ def checked_columns(
         block[:, k] = columns[col]
     clipped = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
                            max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=True)
-    out = pd.DataFrame(block, columns=list(LOG_COLUMNS), copy=False)
-    if segment is not None:
-        out[SEGMENT_COLUMN] = _segment_categorical(segment[0], segment[1], source, block[:, 0], False)
+    codes = None if segment is None else _segment_codes(segment[0], segment[1], source, block[:, 0], False)
     block.setflags(write=False)
-    return out, clipped, block
+    return LazyFrame(block, codes), clipped
 
 
 def _check_options(max_gap_samples: Any, stop_tolerance: Any, max_sample_time: Any) -> None:
@@ -341,8 +355,15 @@ def _segment_categorical(names: list[str | None], codes: np.ndarray, source: str
                          csv_rows: bool) -> pd.Categorical:
     """Segment labels from category ``names`` (stripped; None for no segment) and ``codes``
     (-1: missing) as a Categorical over :data:`SEGMENTS`; an unknown name is an error naming its first row."""
+    return pd.Categorical.from_codes(_segment_codes(names, codes, source, t, csv_rows), categories=list(SEGMENTS))
+
+
+def _segment_codes(names: list[str | None], codes: np.ndarray, source: str, t: np.ndarray, csv_rows: bool
+                   ) -> np.ndarray:
+    """Codes into :data:`SEGMENTS` (-1: no segment) of category ``names`` and their ``codes``."""
     names = [None if v is None or not str(v).strip() else str(v).strip() for v in names]
-    lookup = np.array([-1 if v is None else (SEGMENTS.index(v) if v in SEGMENTS else -2) for v in names] + [-1])
+    lookup = np.array([-1 if v is None else (SEGMENTS.index(v) if v in SEGMENTS else -2) for v in names] + [-1],
+                      dtype=np.int8)
     new_codes = lookup[codes]  # code -1 (missing) picks the trailing -1
     unknown = new_codes == -2
     if unknown.any():
@@ -351,4 +372,4 @@ def _segment_categorical(names: list[str | None], codes: np.ndarray, source: str
             f"{source}: column '{SEGMENT_COLUMN}', {_row_text(source, row, csv_rows)} (t = {_time_text(t[row])} s): "
             f"unknown segment name {names[codes[row]]!r}: expected one of {list(SEGMENTS)} or empty"
         )
-    return pd.Categorical.from_codes(new_codes, categories=list(SEGMENTS))
+    return new_codes
