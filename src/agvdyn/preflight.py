@@ -27,6 +27,7 @@ from agvdyn.identification import (
     stacked_system,
     variance_inflation,
 )
+from agvdyn.identification.fit import COLLINEAR_RELATIVE_STD
 from agvdyn.identification.stretches import stretch_bounds
 from agvdyn.io.summary import LogSummary, summarize_log
 from agvdyn.kinematics import Mode
@@ -131,7 +132,9 @@ def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: I
         if n not in PARAMETER_NAMES:
             continue
         rel = float(est.std_[j] / abs(est.coef_[j])) if est.coef_[j] != 0 else math.inf
-        weak = inflation[j] > settings.max_inflation or rel > settings.max_relative_std
+        # as identify: a poorly conditioned parameter counts when the rows determine it (fit.py)
+        weak = (inflation[j] > settings.max_inflation and not rel <= COLLINEAR_RELATIVE_STD) \
+            or rel > settings.max_relative_std
         out[n] = Excitation(n, "weak" if weak else "ok", float(inflation[j]), rel)
     out.update({n: Excitation(n, "not excited") for n in missing if n in PARAMETER_NAMES})
     return [out[n] for n in PARAMETER_NAMES]
