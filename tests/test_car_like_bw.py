@@ -12,6 +12,7 @@ from agvdyn.identification import UnidentifiableError, identify
 from agvdyn.io import Log
 from agvdyn.montecarlo import model_plant
 from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE
+from agvdyn.preflight import preflight
 from agvdyn.simulation import SimulationSettings, simulate
 from agvdyn.trajectories import (
     Limits,
@@ -83,6 +84,8 @@ def test_identify_fix_none_on_car_like_data_finds_bw_within_10_percent_on_the_mo
     assert abs(est["B_w"] - TRUTH["B_w"]) < 3 * ident.std["B_w"]
     assert max(abs(v) for k, v in err.items() if k != "B_w") < 0.05, err
     assert any("B_w" in w and "determined by the data" in w for w in ident.warnings)
+    check = preflight(logs, PROTOTYPE, fixed={})
+    assert check.ready and {e.name: e.status for e in check.excitation}["B_w"] == "ok"
 
 
 def test_the_car_like_experiment_alone_determines_all_eleven(car_like):
@@ -105,6 +108,8 @@ def test_too_little_car_like_motion_is_refused_naming_bw():
     assert "B_w" in deps and deps["B_w"].relative_std > 0.1
     assert {"m_ch", "C_ch"} <= set(deps)
     assert "car-like" in str(info.value) and "B_w" in str(info.value).splitlines()[-1]
+    check = preflight(logs, PROTOTYPE, fixed={})
+    assert not check.ready and {e.name: e.status for e in check.excitation}["B_w"] == "weak"
 
 
 def test_steering_unit_masses_over_the_contact_point_are_identified_as_wheel_inertia(car_like):
