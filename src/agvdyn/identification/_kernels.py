@@ -30,7 +30,7 @@ SIGNAL_CHANNELS = 25
 _TANH_SATURATION = 22.0
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _tanh(x):  # pragma: no cover - compiled
     if x > _TANH_SATURATION:
         return 1.0
@@ -39,7 +39,7 @@ def _tanh(x):  # pragma: no cover - compiled
     return np.tanh(x)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
     """Row i of column c of ``np.gradient(x, dt, axis=0, edge_order=2)`` (``half_rate = 0.5 / dt``:
     a product instead of numpy's division inside, equal to the last bit or one unit of it)."""
@@ -51,7 +51,7 @@ def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
     return (x[i + 1, c] - x[i - 1, c]) * half_rate
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no cover - compiled
     """Chassis velocities of eq. (3) and the slip speed per wheel of row j, as
     ``agvdyn.odometry._odometry`` (the rows of eq. 1-2 without their zeros; same sums)."""
@@ -193,7 +193,7 @@ def stretch_modes(alpha, trig, qd, k_icr, limit, tol, nominal, h1, r, rest_speed
         mode[j] = m
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _project_row(H, dof, sig, torque, j, i_G, Y, tau):  # pragma: no cover - compiled
     """Row j of ``H_k^T Theta`` (dof, 11) from the entries of Theta ``sig[j]`` and ``H_k^T B u``
     (dof,) from the torques ``torque[j]``, as ``agvdyn.dynamics.project_signals``."""
