@@ -132,7 +132,9 @@ class RowStore:
         where = np.argsort(stored)[free] if not first else None
         for p in self.packed():
             y = p.rows[:, -1]
-            if held:
+            if len(held) == 1:  # B_w alone (the default): one column, no copy of it
+                y = y - p.rows[:, held[0]] * values[0]
+            elif held:
                 y = y - p.rows[:, held] @ values
             A = p.rows[:, :len(free)] if first else p.rows[:, where]
             yield RecordingRows(A, y, p.group, p.step, p.key)
