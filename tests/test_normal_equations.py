@@ -3,6 +3,7 @@ long logs read in pieces, unexcited parameters with unbounded intervals, torque 
 from __future__ import annotations
 
 import json
+import dataclasses
 import math
 
 import numpy as np
@@ -131,7 +132,15 @@ def test_a_long_log_in_pieces_gives_the_whole_logs_answer(long_log, monkeypatch)
     assert chunked.n_samples == whole.n_samples and chunked.n_rows == whole.n_rows
     assert chunked.sources == (str(long_log),)
     np.testing.assert_allclose(_vector(chunked), _vector(whole), rtol=1e-9)
+    # the jackknife's blocks are cut at multiples of the block length of the log's sample index: with
+    # the same bandwidth, pieces and whole log have the same blocks and the same std
+    fixed_band = dataclasses.replace(settings, bandwidth=600)
+    whole, chunked = identify(read_log(long_log), settings=fixed_band), identify(long_log, settings=fixed_band)
+    assert chunked.uncertainty["blocks"] == whole.uncertainty["blocks"]
+    np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=1e-6)
     # HAC windows are cut where the pieces meet: the std may move a little, never much
+    hac = dataclasses.replace(settings, uncertainty="hac")
+    whole, chunked = identify(read_log(long_log), settings=hac), identify(long_log, settings=hac)
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=0.05)
 
 

@@ -300,9 +300,10 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
 
 
 def merge_reduction(reduction: LogReduction, stats: RowStatistics, store: RowStore | None,
-                    group_names: dict[str, int]) -> None:
+                    group_names: dict[str, int], step_offset: int = 0) -> None:
     """Add a log's reduction to ``stats`` (factors merged per key) and its recordings to ``store``,
-    with the key and coordinate codes of the whole identification (in the order first seen)."""
+    with the key and coordinate codes of the whole identification (in the order first seen);
+    ``step_offset`` is added to the rows' steps (a piece of a long log: steps of the whole log)."""
     key_codes = np.array([stats.key_code(k) for k in reduction.keys] or [0], dtype=np.int16)
     group_codes = np.array([group_names.setdefault(g, len(group_names)) for g in reduction.groups] or [0], np.int8)
     for k, R, n in zip(reduction.keys, reduction.factors, reduction.counts):
@@ -311,7 +312,8 @@ def merge_reduction(reduction: LogReduction, stats: RowStatistics, store: RowSto
         return
     key, group = key_codes[reduction.key], group_codes[reduction.group]
     for _, a, e in reduction.recordings:
-        store.add_packed(reduction.rows[a:e], group[a:e], reduction.step[a:e], key[a:e])
+        step = reduction.step[a:e] if not step_offset else reduction.step[a:e] + step_offset
+        store.add_packed(reduction.rows[a:e], group[a:e], step, key[a:e])
 
 
 def row_statistics(blocks: Sequence[EquationBlock], stats: RowStatistics, store: RowStore | None,

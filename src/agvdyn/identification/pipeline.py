@@ -242,17 +242,23 @@ def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, f
     sources: list[str] = []
     labels: set[str] = set()
     n_samples = 0
+    consumed = 0  # own rows of the earlier pieces of a long log: the sample index of this piece's first own row
     try:
         for log, core, rows, reduction in _reduced_logs(logs, geometry, settings, len(p_fixed), order, workers,
                                                         reuse=not keep_blocks):
-            merge_reduction(reduction, stats, store, names)
+            source = str(getattr(log, "path", None) or "<log>")
+            if core is not None and (not sources or sources[-1] != source):
+                consumed = 0
+            offset = 0 if core is None else consumed - core.start  # piece steps -> the log's sample index
+            merge_reduction(reduction, stats, store, names, step_offset=offset)
+            if core is not None:
+                consumed += core.stop - core.start
             if keep_blocks:
                 blocks += rows.blocks
             notes += rows.notes
             counts.add(rows.counts)
             events += rows.slip_events
             thresholds[rows.source] = rows.slip_threshold
-            source = str(getattr(log, "path", None) or "<log>")
             if core is None or not sources or sources[-1] != source:  # pieces of one file: one source
                 sources.append(source)
             labels |= labels_present(log)

@@ -169,14 +169,25 @@ def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
     return omega
 
 
-def _block_moments(est: Estimator, data: RegressionData, L: int,
-                   residuals: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Per recording, the weighted Gram ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p) of its
-    non-overlapping blocks of L steps (blocks without rows are left out); with ``residuals``, the
-    score sums ``A_b^T W r_b`` instead of ``A_b^T W y_b`` (no cancellation)."""
+def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool = False,
+                   per_log: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Per recording (``per_log``: per log), the weighted Gram ``A_b^T W A_b`` (nb, p, p) and
+    ``A_b^T W y_b`` (nb, p) of its non-overlapping blocks of L sample steps (per recording: counted
+    from its first step, empty blocks included; per log: blocks without rows left out); with
+    ``residuals``, the score sums ``A_b^T W r_b`` instead (no cancellation).
+
+    Blocks are cut at multiples of L of the log's sample index, so that with ``per_log`` the
+    stretches of a log and the pieces a long log is read in (recordings that follow each other with
+    increasing steps) share one partition: a long log read in pieces gets the whole log's blocks."""
     p = data.A.shape[1]
+    run: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    last_step = None
     for rec, w in _recording_weights(est, data):
-        block = (rec.step - rec.step.min()) // L
+        if run and (not per_log or rec.step.min() <= last_step):  # a new recording / steps start again: a new log
+            yield _merged_blocks(run, p)
+            run = []
+        last_step = int(rec.step.max())
+        block = rec.step // L if per_log else (rec.step - rec.step.min()) // L
         order = np.argsort(block, kind="stable")
         cuts = np.flatnonzero(np.diff(block[order])) + 1
         bounds = np.concatenate([[0], cuts, [block.size]])
@@ -189,7 +200,28 @@ def _block_moments(est: Estimator, data: RegressionData, L: int,
         for j, (a, e) in enumerate(zip(bounds[:-1], bounds[1:])):
             G[j] = Aws[a:e].T @ As[a:e]
             b[j] = Aws[a:e].T @ ys[a:e]
-        yield G, b
+        if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
+            G_all, b_all = np.zeros((int(block.max()) + 1, p, p)), np.zeros((int(block.max()) + 1, p))
+            G_all[block[order][bounds[:-1]]], b_all[block[order][bounds[:-1]]] = G, b
+            run.append((np.arange(G_all.shape[0]), G_all, b_all))
+        else:
+            run.append((block[order][bounds[:-1]], G, b))
+    if run:
+        yield _merged_blocks(run, p)
+
+
+def _merged_blocks(run: list[tuple[np.ndarray, np.ndarray, np.ndarray]], p: int) -> tuple[np.ndarray, np.ndarray]:
+    """Block moments of consecutive recordings of one log, summed where they share a block."""
+    ids = np.concatenate([r[0] for r in run])
+    G = np.concatenate([r[1] for r in run])
+    b = np.concatenate([r[2] for r in run])
+    if np.all(np.diff(ids) > 0):
+        return G, b
+    uniq, inv = np.unique(ids, return_inverse=True)
+    Gm, bm = np.zeros((uniq.size, p, p)), np.zeros((uniq.size, p))
+    np.add.at(Gm, inv, G)
+    np.add.at(bm, inv, b)
+    return Gm, bm
 
 
 def _bootstrap(est: Estimator, data: RegressionData, L: int, replicates: int, seed: int) -> np.ndarray:
@@ -231,7 +263,7 @@ def _jackknife(est: Estimator, data: RegressionData, L: int) -> tuple[np.ndarray
     c_sum, c_sq = np.zeros(p), np.zeros(p)
     leverages: list[np.ndarray] = []
     capped: set[int] = set()
-    for G, S in _block_moments(est, data, L, residuals=True):  # S: block score sums A_b^T W r_b
+    for G, S in _block_moments(est, data, L, residuals=True, per_log=True):  # S: block score sums A_b^T W r_b
         M = half @ G @ half  # B^1/2 G_b B^1/2, eigenvalues = block leverages
         h, Q = np.linalg.eigh((M + np.swapaxes(M, 1, 2)) / 2)
         leverages.append(h[:, -1])
