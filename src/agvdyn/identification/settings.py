@@ -36,8 +36,8 @@ EXCITATION: Mapping[str, str] = MappingProxyType({
     "d_vw": "straight, lateral or rotation",
     "d_cw": "straight, lateral or rotation",
     "B_w": "the lifted-wheel test (agvdyn simulate/identify lifted-wheel: wheels off the ground), then --fix "
-           "B_w=VALUE; car-like motion separates it from m_ch and C_ch only by terms of the offset a (variance "
-           "inflation ~1e3-1e6)",
+           "B_w=VALUE; or, on the floor, fast rotation plus tight car-like turns (agvdyn simulate car-like, about "
+           "2 min: B_w to ~3-4 %, as the inertia seen at the contact points)",
     **dict.fromkeys(OFFSET_NAMES, "the four identification segments together (steer_left, steer_right, straight and "
                                   "rotation each see another combination of the motor offsets), or no offset "
                                   "estimation (--no-offsets)"),
