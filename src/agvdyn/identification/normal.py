@@ -105,8 +105,8 @@ class RowStore:
     def packed(self) -> Iterator[_Packed]:
         """The stored recordings as ``[A | y]`` blocks (read back from disk when spilled)."""
         for item in self._items:
-            if isinstance(item, tuple):
-                rows, codes = np.load(item[0]), np.load(item[1])
+            if isinstance(item, tuple):  # the rows mapped, read from the page cache only where used
+                rows, codes = np.load(item[0], mmap_mode="r"), np.load(item[1])
                 key = codes[:, 2].astype(np.int16)
                 yield _Packed(rows, codes[:, 0].astype(np.int8), codes[:, 1],
                               None if key.size and key[0] < 0 else key)
@@ -114,11 +114,16 @@ class RowStore:
                 yield item
 
     def __iter__(self) -> Iterator[RecordingRows]:
-        """Rows of each recording with A's columns in their natural order."""
+        """Rows of each recording with A's columns in their natural order (when the store holds them
+        in another, A is reordered on first use: asking for ``step`` alone costs no copy)."""
         inverse = None if self.columns is None else np.argsort(self.columns)
         for p in self.packed():
-            A = p.rows[:, :-1] if inverse is None else p.rows[:, inverse]
-            yield RecordingRows(A, p.rows[:, -1], p.group, p.step, p.key)
+            if inverse is None:
+                yield RecordingRows(p.rows[:, :-1], p.rows[:, -1], p.group, p.step, p.key)
+                continue
+            rec = _ReorderedRows(None, p.rows[:, -1], p.group, p.step, p.key)  # type: ignore[arg-type]
+            object.__setattr__(rec, "_source", (p.rows, inverse))
+            yield rec
 
     def free_rows(self, free: Sequence[int], theta_fixed: np.ndarray) -> Iterator[RecordingRows]:
         """Rows of each recording with the columns ``free`` only and ``y - A theta_fixed`` (eq. 24);
@@ -159,6 +164,18 @@ class RowStore:
         if self._cleanup is not None:
             self._cleanup()
         self._items.clear()
+
+
+class _ReorderedRows(RecordingRows):
+    """:class:`RecordingRows` whose A is taken from the stored rows (columns reordered) on first use."""
+
+    def __getattribute__(self, name: str):
+        value = object.__getattribute__(self, name)
+        if name == "A" and value is None:
+            rows, inverse = object.__getattribute__(self, "_source")
+            value = rows[:, inverse]
+            object.__setattr__(self, "A", value)
+        return value
 
 
 @dataclass(frozen=True, eq=False)
