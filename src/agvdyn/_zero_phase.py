@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["sosfiltfilt_columns", "filtfilt_in_place", "padded_buffer"]
+__all__ = ["sosfiltfilt_columns", "filtfilt_in_place"]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=False)
@@ -67,15 +67,9 @@ def _filtfilt(sos, zi, x, padlen):  # pragma: no cover - compiled
     return ext[padlen:padlen + n]
 
 
-def padded_buffer(n: int, channels: int, padlen: int) -> np.ndarray:
-    """An empty (n + 2 padlen, channels) buffer for :func:`filtfilt_in_place`; the signal goes in
-    rows ``padlen .. padlen + n``."""
-    return np.empty((n + 2 * padlen, channels))
-
-
 def filtfilt_in_place(sos: np.ndarray, zi: np.ndarray, ext: np.ndarray, padlen: int) -> np.ndarray:
-    """Zero-phase filtering of the signal in the middle rows of ``ext`` (see :func:`padded_buffer`),
-    in place; returns the view of the filtered signal (n, channels)."""
+    """Zero-phase filtering of the signal in rows ``padlen .. padlen + n`` of ``ext`` (n + 2 padlen,
+    channels), in place (the padding rows are written); returns the view of the filtered signal."""
     n = ext.shape[0] - 2 * padlen
     if ext.ndim != 2 or not ext.flags.c_contiguous or n <= padlen:
         raise ValueError(f"buffer of shape {ext.shape}: expected a C-contiguous (n + 2 padlen, channels) array "

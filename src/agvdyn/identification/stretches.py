@@ -21,7 +21,7 @@ from agvdyn.identification._kernels import SIGNAL_CHANNELS, recording_breaks, st
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.platform import Geometry
-from agvdyn.signals import filter_design, lowpass, row_max_abs, uniform_sample_time
+from agvdyn.signals import filter_design, lowpass, uniform_sample_time
 
 __all__ = ["Stretch", "stretch_bounds", "stretches_of", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
            "torque_lead", "align_torque"]
