@@ -232,7 +232,9 @@ def reports(tmp_path_factory):
     write_log(straight, identification_frame({"straight": 6.0}, geometry=other)[0], {"platform": other.to_dict()})
     runner = CliRunner()
     ok = root / "ok.html"
-    result = runner.invoke(app, ["report", "--ident", str(ident), "--validation", str(lane), "--out", str(ok)])
+    # exact model logs: the HAC covariance, as in test_report (the jackknife's few blocks may warn)
+    result = runner.invoke(app, ["report", "--ident", str(ident), "--validation", str(lane), "--out", str(ok),
+                                 "--uncertainty", "hac"])
     assert result.exit_code == 0, result.output
     refused = root / "refused.html"
     result = runner.invoke(app, ["report", "--ident", str(straight), "--out", str(refused)])
