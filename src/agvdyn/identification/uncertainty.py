@@ -188,26 +188,31 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
             run = []
         last_step = int(rec.step.max())
         block = rec.step // L if per_log else (rec.step - rec.step.min()) // L
-        order = np.argsort(block, kind="stable")
-        cuts = np.flatnonzero(np.diff(block[order])) + 1
-        bounds = np.concatenate([[0], cuts, [block.size]])
-        As, ys = rec.A[order], rec.y[order]
-        if residuals:
-            ys = ys - As @ est.coef_
-        Aws = As * w[order][:, None]
-        G = np.empty((bounds.size - 1, p, p))
-        b = np.empty((bounds.size - 1, p))
-        for j, (a, e) in enumerate(zip(bounds[:-1], bounds[1:])):
-            G[j] = Aws[a:e].T @ As[a:e]
-            b[j] = Aws[a:e].T @ ys[a:e]
+        ys = rec.y - rec.A @ est.coef_ if residuals else rec.y
+        ids, G, b = _block_sums(block, rec.A, w, ys)
         if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
             G_all, b_all = np.zeros((int(block.max()) + 1, p, p)), np.zeros((int(block.max()) + 1, p))
-            G_all[block[order][bounds[:-1]]], b_all[block[order][bounds[:-1]]] = G, b
+            G_all[ids], b_all[ids] = G, b
             run.append((np.arange(G_all.shape[0]), G_all, b_all))
         else:
-            run.append((block[order][bounds[:-1]], G, b))
+            run.append((ids, G, b))
     if run:
         yield _merged_blocks(run, p)
+
+
+def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Block ids present and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p)
+    (one BLAS product per block: faster than a padded batched product for blocks of hundreds of rows)."""
+    order = np.argsort(block, kind="stable")
+    cuts = np.flatnonzero(np.diff(block[order])) + 1
+    bounds = np.concatenate([[0], cuts, [block.size]])
+    Ay = np.column_stack([A[order], y[order]])
+    Aw = A[order] * w[order][:, None]
+    moments = np.empty((bounds.size - 1, A.shape[1], A.shape[1] + 1))
+    for j, (a, e) in enumerate(zip(bounds[:-1], bounds[1:])):
+        np.matmul(Aw[a:e].T, Ay[a:e], out=moments[j])
+    return block[order][bounds[:-1]], moments[:, :, :-1], moments[:, :, -1]
 
 
 def _merged_blocks(run: list[tuple[np.ndarray, np.ndarray, np.ndarray]], p: int) -> tuple[np.ndarray, np.ndarray]:
@@ -297,7 +302,7 @@ def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data:
     method = UncertaintyMethod(method)
     if method is UncertaintyMethod.CLASSIC:
         return Uncertainty(method, est.cov_, {"sigma2": float(est.sigma2_)})
-    lengths = [int(rec.step.max() - rec.step.min()) + 1 for rec in data.store]
+    lengths = data.store.lengths()  # without reading the rows back
     tau = correlation_time(_step_scores(est, data, max_steps=1 << 15))
     L = int(bandwidth) if bandwidth is not None else int(min(max(min_bandwidth, math.ceil(bandwidth_factor * tau.max())),
                                                               max(1, max(lengths) // 4)))
