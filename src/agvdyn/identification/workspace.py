@@ -9,35 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from agvdyn._memory import keep_freed_memory  # re-exported
+
 __all__ = ["Workspace", "empty", "keep_freed_memory"]
-
-_KEPT = False
-
-
-def keep_freed_memory() -> bool:
-    """Ask glibc, once per process, to serve arrays below 64 MB from its heap and keep up to 64 MB
-    of freed memory per arena for reuse (the command line keeps 256 MB), instead of fresh
-    zero pages from the kernel for every temporary array of numpy, pandas and pyarrow: page faults
-    cost half of the row pipeline's time on this project's machines, and they serialise threads
-    (measured: 21.8 -> 13.5 ms per 35,500-sample log, two threads 0.7x -> 1.5x). MALLOC_* settings
-    in the environment win; elsewhere than Linux/glibc nothing happens. Returns whether it was set."""
-    global _KEPT
-    if _KEPT:
-        return True
-    import ctypes
-    import os
-    import sys
-
-    if not sys.platform.startswith("linux") or any(k.startswith("MALLOC_") for k in os.environ):
-        return False
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        for option, value in ((-3, 64 << 20), (-1, 64 << 20), (-2, 16 << 20)):  # M_MMAP_THRESHOLD, M_TRIM_THRESHOLD, M_TOP_PAD
-            libc.mallopt(option, value)
-    except (OSError, AttributeError):
-        return False
-    _KEPT = True
-    return True
 
 
 class Workspace:

@@ -1,0 +1,32 @@
+"""glibc's reuse of freed memory (a light module: the command line sets it before anything loads)."""
+from __future__ import annotations
+
+__all__ = ["keep_freed_memory"]
+
+_KEPT = False
+
+
+def keep_freed_memory(trim: int = 64 << 20, top_pad: int = 16 << 20) -> bool:
+    """Ask glibc, once per process (the first call wins), to serve arrays below 64 MB from its heap
+    and keep up to ``trim`` bytes of freed memory per arena for reuse, instead of fresh zero pages
+    from the kernel for every temporary array of numpy, pandas and pyarrow: page faults cost half of
+    the row pipeline's time on this project's machines, and they serialise threads (measured: 21.8
+    -> 13.5 ms per 35,500-sample log, two threads 0.7x -> 1.5x). MALLOC_* settings in the
+    environment win; elsewhere than Linux/glibc nothing happens. Returns whether it is set."""
+    global _KEPT
+    if _KEPT:
+        return True
+    import ctypes
+    import os
+    import sys
+
+    if not sys.platform.startswith("linux") or any(k.startswith("MALLOC_") for k in os.environ):
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        for option, value in ((-3, 64 << 20), (-1, trim), (-2, top_pad)):  # M_MMAP_THRESHOLD, M_TRIM_THRESHOLD, M_TOP_PAD
+            libc.mallopt(option, value)
+    except (OSError, AttributeError):
+        return False
+    _KEPT = True
+    return True
