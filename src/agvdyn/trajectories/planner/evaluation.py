@@ -65,14 +65,15 @@ def _guarded(keep: np.ndarray, guard: int) -> np.ndarray:
 
 
 def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
-    then the offset columns) and the noise level of each row; ``validity``: the optimiser's smooth
-    weights instead of the mask."""
+    then the offset columns), the noise level of each row's coordinate and the row's variance
+    factor (:meth:`NoiseLevels.variance_factor`); ``validity``: the optimiser's smooth weights
+    instead of the mask."""
     g = traj.geometry
     n_p = 11 if with_bw else 10
     guard = int(round(settings.stiction_guard / traj.sample_time))
-    rows, sig = [], []
+    rows, sig, fac = [], [], []
     for seg in traj.segments:
         if seg.lifted:  # no rows of the vehicle
             continue
@@ -83,8 +84,7 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             v = seg.s_dot[:, j]
             th = settings.threshold(coord)
             if validity:
-                sigma, growth = settings.noise.of(coord), settings.noise.growth(coord)
-                keep_w = _row_weights(v, seg.s_ddot[:, j], th, growth, sigma, settings).wF
+                keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings).wU
                 keep = keep_w > 1e-6
             else:
                 keep = _guarded(np.abs(v) >= th, guard)
@@ -95,9 +95,10 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             block = np.concatenate([Y[keep, j, :n_p], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
             rows.append(block)
             sig.append(np.full(int(keep.sum()), settings.noise.of(coord)))
+            fac.append(settings.noise.variance_factor(coord, seg.s_ddot[keep, j]))
     if not rows:
-        return np.zeros((0, n_p + _OFFSETS)), np.zeros(0)
-    return np.concatenate(rows), np.concatenate(sig)
+        return np.zeros((0, n_p + _OFFSETS)), np.zeros(0), np.zeros(0)
+    return np.concatenate(rows), np.concatenate(sig), np.concatenate(fac)
 
 
 def _information(A: np.ndarray, sig: np.ndarray, n_p: int = 10) -> tuple[np.ndarray, np.ndarray]:
@@ -105,23 +106,36 @@ def _information(A: np.ndarray, sig: np.ndarray, n_p: int = 10) -> tuple[np.ndar
     return Aw.T @ Aw, A[:, :n_p].T @ A[:, :n_p]
 
 
+def _row_variance(A: np.ndarray, sig: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """Omega of the sandwich: the rows' information times their variance factor."""
+    Aw = A / sig[:, None]
+    return (Aw * factor[:, None]).T @ Aw
+
+
 def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(),
                       settings: PlanSettings = PlanSettings(), *, estimate_bw: bool = False) -> SequenceEvaluation:
     """Predicted cond, standard deviations, floor, duration and peak torque of an identification
     sequence, from its planned motion with the identification's stiction mask and guard.
+
+    The stds are those of the weighted least squares with one weight per coordinate (the
+    identification's ``wls``) under rows whose effective variance grows with the acceleration
+    (:class:`NoiseLevels`): the sandwich ``F^-1 Omega F^-1``, ``Omega`` the rows' information
+    times their variance factor.
 
     ``estimate_bw``: B_w estimated with the others (``identify --fix none``) instead of known; its
     std is then in ``std`` too (infinite when the motion does not determine it).
     """
     names = FREE + (("B_w",) if estimate_bw else ())
     n_p = len(names)
-    A, sig = _sequence_rows(traj, settings, with_bw=estimate_bw)
+    A, sig, factor = _sequence_rows(traj, settings, with_bw=estimate_bw)
     F, U = _information(A, sig, n_p)
+    Omega = _row_variance(A, sig, factor)
     free = [i for i in range(F.shape[0]) if F[i, i] > 0]
     std = np.full(n_p, np.inf)
     corr: dict[str, float] = {}
     try:
-        cov = np.linalg.inv(F[np.ix_(free, free)])
+        Finv = np.linalg.inv(F[np.ix_(free, free)])
+        cov = Finv @ Omega[np.ix_(free, free)] @ Finv
         d = np.sqrt(np.maximum(np.diag(cov), 0))
         for k, i in enumerate(free):
             if i < n_p:

@@ -21,6 +21,7 @@ from agvdyn.trajectories.segments import Trajectory
 from agvdyn.trajectories.planner.evaluation import (
     SequenceEvaluation,
     _information,
+    _row_variance,
     _sequence_rows,
     default_for_floor,
     evaluate_sequence,
@@ -134,7 +135,7 @@ def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:
     res = scipy.optimize.minimize(problem, x0, jac=True, method="L-BFGS-B",
                                   options={"maxiter": problem.settings.max_iterations, "maxcor": 20})
     msg = str(res.message)
-    F, U, T, _, band = problem.information(res.x)
+    F, _, U, T, _, band = problem.information(res.x)
     info = {"start": k, "objective": float(res.fun), "iterations": int(res.nit),
             "harmonics": [b.H for b in problem.bases], "durations": [float(x) for x in T],
             "cond_smooth": float(np.exp(_log_cond(U)[0])), "penalty_share": float(band), "message": msg,
@@ -168,14 +169,18 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
     align_time = sum(a.n_samples for a in aligns) * dt
     available = duration - align_time
     # constant information of the alignments (the identification uses their rows)
-    A0, s0 = _sequence_rows(Trajectory(tuple(aligns[:4]), geom, dt), settings, validity=True)
-    A1, s1 = _sequence_rows(Trajectory((aligns[4],), geom, dt), settings, validity=True)
-    F0, U0 = _information(np.concatenate([A0, A1]), np.concatenate([s0, s1]))
+    A0, s0, q0 = _sequence_rows(Trajectory(tuple(aligns[:4]), geom, dt), settings, validity=True)
+    A1, s1, q1 = _sequence_rows(Trajectory((aligns[4],), geom, dt), settings, validity=True)
+    A0, s0, q0 = np.concatenate([A0, A1]), np.concatenate([s0, s1]), np.concatenate([q0, q1])
+    F0, U0 = _information(A0, s0)
     F0 = F0 + 1e-12 * np.eye(F0.shape[0])
-    ref_rows, ref_sig = _sequence_rows(reference_traj, settings, validity=True)
+    O0 = _row_variance(A0, s0, q0) + 1e-12 * np.eye(F0.shape[0])
+    ref_rows, ref_sig, ref_q = _sequence_rows(reference_traj, settings, validity=True)
     Fr, _ = _information(ref_rows, ref_sig)
     try:
-        ref_log = 0.5 * np.log(np.diag(np.linalg.inv(Fr))[:10]) - np.log(np.abs(params.to_vector()[:10]))
+        Fri = np.linalg.inv(Fr)
+        ref_cov = Fri @ _row_variance(ref_rows, ref_sig, ref_q) @ Fri
+        ref_log = 0.5 * np.log(np.diag(ref_cov)[:10]) - np.log(np.abs(params.to_vector()[:10]))
     except np.linalg.LinAlgError:
         ref_log = None
     rng = np.random.default_rng(settings.seed)
@@ -203,7 +208,7 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
         else:
             thetas = [rng.standard_normal(2 * H) / np.tile(np.arange(1, H + 1), 2) for H in harmonics]
         x0 = np.concatenate([*thetas, eta0])
-        problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points)
+        problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points, O0)
         jobs.append((problem_args, x0, k))
     workers = settings.workers or min(2, os.cpu_count() or 1)
     if workers > 1 and len(jobs) > 1:

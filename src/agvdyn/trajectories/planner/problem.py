@@ -31,7 +31,7 @@ class _PhaseModel:
     alpha: np.ndarray       # (2,) steering angles at rest of the phase
     P: np.ndarray           # (4, 14): rows of eq. (19) per unit a, v, sign v and the offsets
     sigma: float
-    growth: float
+    knee: float             # acceleration at which the row's effective variance doubles (NoiseLevels)
     threshold: float
     q_limit: float
     v_limit: float
@@ -80,7 +80,7 @@ def _phase_models(geom: Geometry, params: Parameters, floor: FloorSpace, limits:
         if wheel > 0:
             v_lim = min(v_lim, limits.wheel_speed / wheel)
         out.append(_PhaseModel(name, mode, coordinate, alpha, P, settings.noise.of(coordinate),
-                               settings.noise.growth(coordinate), settings.threshold(coordinate), q_lim, v_lim, a_lim, K,
+                               settings.noise.knee(coordinate), settings.threshold(coordinate), q_lim, v_lim, a_lim, K,
                                limits.motor_torque * limits.feedforward_share))
     return out
 
@@ -144,13 +144,14 @@ class _Problem:
 
     def __init__(self, models: list[_PhaseModel], harmonics: list[int], available: float, settings: PlanSettings,
                  params: np.ndarray, F0: np.ndarray, U0: np.ndarray, reference_log_std: np.ndarray | None,
-                 sample_time: float, grid_points: list[int]):
+                 sample_time: float, grid_points: list[int], O0: np.ndarray | None = None):
         self.models = models
         self.bases = [_Basis.of(H, n) for H, n in zip(harmonics, grid_points)]
         self.available = available
         self.settings = settings
         self.log_p = np.log(np.abs(params[:10]))
         self.F0, self.U0 = F0, U0
+        self.O0 = F0 if O0 is None else O0
         self.ref = reference_log_std
         self.Ts = sample_time
         self.t_min = np.array([max(settings.min_phase, 2 * math.pi * H / settings.max_frequency) for H in harmonics])
@@ -186,64 +187,72 @@ class _Problem:
         return best[0] * self.settings.margin, best[1], best[2], best[3]
 
     def phase_moments(self, j: int, theta: np.ndarray, T: float, want_grad: bool = False):
-        """Moment matrices (4, 4) of phase j in units of T_s rows, noise-weighted (relative to the
-        phase's level) for F and unweighted for U, its penalty time (s; see :func:`_row_weights`),
-        and what the gradient needs."""
+        """Moment matrices (4, 4) of phase j in units of T_s rows: of the rows kept (validity weights;
+        for F and U) and of the rows times their variance factor (for Omega), its penalty time (s;
+        see :func:`_row_weights`), and what the gradient needs."""
         m, B = self.models[j], self.bases[j]
         c = B.Pi @ theta
         s, kind, i_star, peak = self.scale(j, c, T)
         v0, a0 = B.Cv @ c, B.Ca @ c / T
         v, a = s * v0, s * a0
-        wts = _row_weights(v, a, m.threshold, m.growth, m.sigma, self.settings)
+        wts = _row_weights(v, a, m.threshold, m.knee, self.settings)
         Z = np.stack([a, v, np.sign(v), np.ones_like(v)], axis=1)
         unit = T / B.n / self.Ts
-        MF = unit * (Z * wts.wF[:, None]).T @ Z
-        MU = unit * (Z * wts.wU[:, None]).T @ Z
+        M = unit * (Z * wts.wU[:, None]).T @ Z
+        MO = unit * (Z * wts.wO[:, None]).T @ Z
         penalty = T / B.n * float(np.sum(wts.pen))
         if not want_grad:
-            return MF, MU, penalty, None
-        return MF, MU, penalty, (c, s, kind, i_star, peak, v0, a0, Z, wts, unit, T / B.n)
+            return M, MO, penalty, None
+        return M, MO, penalty, (c, s, kind, i_star, peak, v0, a0, Z, wts, unit, T / B.n)
 
     def information(self, x: np.ndarray, want_grad: bool = False):
         thetas, eta = self.split(x)
         T = self.durations(eta)
-        F, U = self.F0.copy(), self.U0.copy()
+        F, O, U = self.F0.copy(), self.O0.copy(), self.U0.copy()
         cache, band = [], 0.0
         for j, m in enumerate(self.models):
-            MF, MU, b, aux = self.phase_moments(j, thetas[j], T[j], want_grad)  # b: penalty time
-            F += m.P.T @ MF @ m.P / m.sigma**2
-            U += m.P[:, :10].T @ MU @ m.P[:, :10]
+            M, MO, b, aux = self.phase_moments(j, thetas[j], T[j], want_grad)  # b: penalty time
+            F += m.P.T @ M @ m.P / m.sigma**2
+            O += m.P.T @ MO @ m.P / m.sigma**2
+            U += m.P[:, :10].T @ M @ m.P[:, :10]
             band += b
             cache.append(aux)
-        return F, U, T, cache, band / self.available
+        return F, O, U, T, cache, band / self.available
 
     def objective(self, x: np.ndarray) -> float:
-        F, U, _, _, band = self.information(x)
-        return self.criterion(F, U)[0] + band
+        F, O, U, _, _, band = self.information(x)
+        return self.criterion(F, O, U)[0] + band
 
-    def criterion(self, F: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        """Objective J(F, U) and its derivatives dJ/dF (14, 14), dJ/dU (10, 10)."""
+    def criterion(self, F: np.ndarray, O: np.ndarray, U: np.ndarray
+                  ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Objective J(F, Omega, U) and its derivatives dJ/dF, dJ/dOmega (14, 14), dJ/dU (10, 10).
+
+        The covariance is the sandwich ``Cov = F^-1 Omega F^-1`` (one weight per coordinate, rows
+        whose variance grows with the acceleration); for a J of it with ``H = dJ/dCov``:
+        ``dJ/dF = -(F^-1 H Cov + Cov H F^-1)``, ``dJ/dOmega = F^-1 H F^-1``."""
         st = self.settings
-        dF, dU = np.zeros_like(F), np.zeros_like(U)
+        dF, dO, dU = np.zeros_like(F), np.zeros_like(O), np.zeros_like(U)
         try:
-            Cov = np.linalg.inv(F)
+            Fi = np.linalg.inv(F)
         except np.linalg.LinAlgError:
-            return 1e6, dF, dU
+            return 1e6, dF, dO, dU
+        Cov = Fi @ O @ Fi
+        Cov = 0.5 * (Cov + Cov.T)
         if st.objective == "d-optimal":
-            sign, logdet = np.linalg.slogdet(F)
-            Foo = F[10:, 10:]
-            J = -logdet
-            dF = -Cov
-            if Foo.size:
-                J += np.linalg.slogdet(Foo)[1]
-                dF[10:, 10:] += np.linalg.inv(Foo)
-            return float(J) / 10, dF / 10, dU
+            sign, logdet = np.linalg.slogdet(Cov[:10, :10])
+            if sign <= 0:
+                return 1e6, dF, dO, dU
+            H = np.zeros_like(F)
+            H[:10, :10] = np.linalg.inv(Cov[:10, :10]) / 10
+            dF = -(Fi @ H @ Cov + Cov @ H @ Fi)
+            dO = Fi @ H @ Fi
+            return float(logdet) / 10, 0.5 * (dF + dF.T), 0.5 * (dO + dO.T), dU
         log_cond, dlc = _log_cond(U)
         if st.objective == "cond":
-            return log_cond, dF, dlc
+            return log_cond, dF, dO, dlc
         var = np.diag(Cov)[:10]
         if np.any(var <= 0):
-            return 1e6, dF, dU
+            return 1e6, dF, dO, dU
         log_rel = 0.5 * np.log(var) - self.log_p
         J = float(np.mean(log_rel))
         g = np.full(10, 0.1)  # dJ/dlog_rel
@@ -255,35 +264,37 @@ class _Problem:
         sp, dsp = _softplus(np.array([log_cond - math.log(st.cond_target)]), 0.05)
         J += st.reference_penalty * float(sp[0] ** 2)
         dU = st.reference_penalty * 2 * sp[0] * dsp[0] * dlc
-        # d log_rel_i = 0.5 dvar_i / var_i ; dvar_i = -(Cov dF Cov)_ii
+        # d log_rel_i = 0.5 dvar_i / var_i
         h = np.zeros(F.shape[0])
         h[:10] = g * 0.5 / var
-        dF = -(Cov * h) @ Cov
-        return J, dF, dU
+        FH = Fi * h  # F^-1 H with H = diag(h)
+        dF = -(FH @ Cov + (FH @ Cov).T)
+        dO = FH @ Fi
+        return J, dF, 0.5 * (dO + dO.T), dU
 
     def __call__(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        F, U, T, cache, band = self.information(x, want_grad=True)
-        J, dF, dU = self.criterion(F, U)
+        F, O, U, T, cache, band = self.information(x, want_grad=True)
+        J, dF, dO, dU = self.criterion(F, O, U)
         if J >= 1e6:
             return J, np.zeros_like(x)
         lam = 1.0 / self.available
         J += band
         thetas, eta = self.split(x)
         grad = np.zeros_like(x)
-        GF, GU = [], []
+        GF, GO = [], []  # dJ/dM (through F and U) and dJ/dMO per phase
         for j, (m, aux) in enumerate(zip(self.models, cache)):
-            Gf = m.P @ dF @ m.P.T / m.sigma**2
-            Gu = m.P[:, :10] @ dU @ m.P[:, :10].T
+            Gf = m.P @ dF @ m.P.T / m.sigma**2 + m.P[:, :10] @ dU @ m.P[:, :10].T
+            Go = m.P @ dO @ m.P.T / m.sigma**2
             GF.append(0.5 * (Gf + Gf.T))
-            GU.append(0.5 * (Gu + Gu.T))
-            grad[self.offsets[j]:self.offsets[j + 1]] = self._theta_gradient(j, GF[j], GU[j], lam, aux, T[j])
+            GO.append(0.5 * (Go + Go.T))
+            grad[self.offsets[j]:self.offsets[j + 1]] = self._theta_gradient(j, GF[j], GO[j], lam, aux, T[j])
         # durations: finite differences per phase (the basis lives on t / T, so only scalars change)
         dJ_dT = np.zeros(4)
         for j, m in enumerate(self.models):
             h = 1e-4 * T[j]
-            MFp, MUp, bp, _ = self.phase_moments(j, thetas[j], T[j] + h)
-            MFm, MUm, bm, _ = self.phase_moments(j, thetas[j], T[j] - h)
-            dJ_dT[j] = float(np.sum(GF[j] * (MFp - MFm)) + np.sum(GU[j] * (MUp - MUm)) + lam * (bp - bm)) / (2 * h)
+            Mp, MOp, bp, _ = self.phase_moments(j, thetas[j], T[j] + h)
+            Mm, MOm, bm, _ = self.phase_moments(j, thetas[j], T[j] - h)
+            dJ_dT[j] = float(np.sum(GF[j] * (Mp - Mm)) + np.sum(GO[j] * (MOp - MOm)) + lam * (bp - bm)) / (2 * h)
         e = np.exp(eta - eta.max())
         sm = e / e.sum()
         R = self.available - self.t_min.sum()
@@ -291,13 +302,13 @@ class _Problem:
         grad[self.offsets[-1]:] = dT_deta.T @ dJ_dT
         return J, grad
 
-    def _theta_gradient(self, j: int, GF: np.ndarray, GU: np.ndarray, lam: float, aux, T: float) -> np.ndarray:
+    def _theta_gradient(self, j: int, GF: np.ndarray, GO: np.ndarray, lam: float, aux, T: float) -> np.ndarray:
         m, B = self.models[j], self.bases[j]
         c, s, kind, i_star, peak, v0, a0, Z, w, unit, dt_row = aux
-        ZF, ZU = Z @ GF, Z @ GU  # (n, 4)
-        qF, qU = np.einsum("ni,ni->n", ZF, Z), np.einsum("ni,ni->n", ZU, Z)
-        g_a = unit * (2 * w.wF * ZF[:, 0] + 2 * w.wU * ZU[:, 0] + w.wF_a * qF + w.wU_a * qU) + lam * dt_row * w.pen_a
-        g_v = unit * (2 * w.wF * ZF[:, 1] + 2 * w.wU * ZU[:, 1] + w.wF_v * qF + w.wU_v * qU) + lam * dt_row * w.pen_v
+        ZF, ZO = Z @ GF, Z @ GO  # (n, 4)
+        qF, qO = np.einsum("ni,ni->n", ZF, Z), np.einsum("ni,ni->n", ZO, Z)
+        g_a = unit * (2 * w.wU * ZF[:, 0] + 2 * w.wO * ZO[:, 0] + w.wU_a * qF + w.wO_a * qO) + lam * dt_row * w.pen_a
+        g_v = unit * (2 * w.wU * ZF[:, 1] + 2 * w.wO * ZO[:, 1] + w.wU_v * qF + w.wO_v * qO) + lam * dt_row * w.pen_v
         # v = s Cv c, a = s Ca c / T
         dc = s * (B.Cv.T @ g_v + B.Ca.T @ g_a / T)
         dJ_ds = float(g_v @ v0 + g_a @ a0)
@@ -319,20 +330,19 @@ class _Problem:
 class _Weights:
     """Per-row weights of a phase and their partial derivatives in v and a."""
 
-    wF: np.ndarray
     wU: np.ndarray
+    wO: np.ndarray
     pen: np.ndarray
-    wF_v: np.ndarray
-    wF_a: np.ndarray
     wU_v: np.ndarray
     wU_a: np.ndarray
+    wO_v: np.ndarray
+    wO_a: np.ndarray
     pen_v: np.ndarray
     pen_a: np.ndarray
 
 
-def _row_weights(v: np.ndarray, a: np.ndarray, th: float, growth: float, sigma: float, st: PlanSettings
-                 ) -> _Weights:
-    """Weights of the rows of a phase in the information (``wF``: noise-weighted, ``wU``: for cond)
+def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanSettings) -> _Weights:
+    """Weights of the rows of a phase (``wU``: in F and in cond; ``wO``: in Omega, the rows' variance)
     and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
 
     * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
@@ -343,7 +353,7 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, growth: float, sigma: 
       (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
       ``reversal_penalty`` per share of the time;
     * the time below the validity speed costs ``band_penalty`` per share;
-    * tyre slip ``r = 1 / (1 + (growth a^2 / sigma)^2)`` (:meth:`NoiseLevels.growth`).
+    * the row's variance factor ``q = 1 + (a / knee)^4`` (:class:`NoiseLevels`): ``wO = wU q``.
     """
     V, A = np.abs(v), np.abs(a)
     sv, sa = np.sign(v), np.sign(a)
@@ -360,19 +370,18 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, growth: float, sigma: 
     dk2 = k2 * (1 - k2) / d
     k_V = dk1 * k2 - k1 * dk2
     k_A = -g * dk1 * k2 + st.reversal_window * k1 * dk2
-    if growth > 0:
-        g2 = (growth / sigma) ** 2
-        r = 1 / (1 + g2 * a**4)
-        r_a = -r**2 * 4 * g2 * a**3
+    if math.isfinite(knee):
+        q = 1 + (a / knee) ** 4
+        q_a = 4 * a**3 / knee**4
     else:
-        r, r_a = np.ones_like(a), np.zeros_like(a)
+        q, q_a = np.ones_like(a), np.zeros_like(a)
     wU = wv * (1 - k)
     wU_V = dwv * (1 - k) - wv * k_V
     wU_A = -wv * k_A
-    wF = wU * r
     pen = st.band_penalty * (1 - wv) + st.reversal_penalty * k
-    return _Weights(wF=wF, wU=wU, pen=pen, wF_v=sv * wU_V * r, wF_a=sa * wU_A * r + wU * r_a,
-                    wU_v=sv * wU_V, wU_a=sa * wU_A, pen_v=sv * (-st.band_penalty * dwv + st.reversal_penalty * k_V),
+    return _Weights(wU=wU, wO=wU * q, pen=pen, wU_v=sv * wU_V, wU_a=sa * wU_A, wO_v=sv * wU_V * q,
+                    wO_a=sa * wU_A * q + wU * q_a,
+                    pen_v=sv * (-st.band_penalty * dwv + st.reversal_penalty * k_V),
                     pen_a=sa * st.reversal_penalty * k_A)
 
 
