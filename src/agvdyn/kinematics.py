@@ -112,6 +112,16 @@ def wheel_headings(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
     return alpha[:, _SIDE] * geom.heading_sign
 
 
+@numba.njit(cache=True, inline="always")
+def wheel_frame(i, l, b):  # pragma: no cover - compiled
+    """Wheel i (fl, rl, fr, rr) of eq. (1)-(2): on the left, sigma (+1 front, -1 rear), side (+1
+    left, -1 right) and its mounting point (cx, cy) in the chassis frame."""
+    left = i < 2
+    sigma = 1.0 if i % 2 == 0 else -1.0
+    side = 1.0 if left else -1.0
+    return left, sigma, side, (l / 2 if i % 2 == 0 else -l / 2), (b / 2 if left else -b / 2)
+
+
 @numba.njit(cache=True)
 def constraint_matrix_into(l, b, a, radii, alpha_l, alpha_r, A):  # pragma: no cover - compiled
     """A(alpha) ``(8, 9)`` of eq. (1)-(2) for one configuration, written into ``A``.
@@ -123,11 +133,7 @@ def constraint_matrix_into(l, b, a, radii, alpha_l, alpha_r, A):  # pragma: no c
     """
     A[:, :] = 0.0
     for i in range(4):
-        left = i < 2
-        sigma = 1.0 if i % 2 == 0 else -1.0
-        side = 1.0 if left else -1.0
-        cx = l / 2 if i % 2 == 0 else -l / 2
-        cy = b / 2 if left else -b / 2
+        left, sigma, side, cx, cy = wheel_frame(i, l, b)
         theta = sigma * (alpha_l if left else alpha_r)
         c, s = np.cos(theta), np.sin(theta)
         A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from agvdyn.kinematics import car_like_model_into, icr_state_trig
+from agvdyn.kinematics import car_like_model_into, icr_state_trig, wheel_frame
 
 __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
 
@@ -59,11 +59,7 @@ def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no 
     trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
     ad0, ad1 = qd[j, 3], qd[j, 4]
     for i in range(4):
-        left = i < 2
-        sigma = 1.0 if i % 2 == 0 else -1.0
-        side = 1.0 if left else -1.0
-        cx = l / 2 if i % 2 == 0 else -l / 2
-        cy = b / 2 if left else -b / 2
+        left, sigma, side, cx, cy = wheel_frame(i, l, b)
         c = cl if left else cr
         s = sigma * (sl if left else sr)
         A[i, 0], A[i, 1], A[i, 2] = -s, c, s * cy + c * cx
