@@ -91,7 +91,6 @@ def test_noise_grows_with_the_acceleration():
     assert all(grown.std[n] >= constant.std[n] * (1 - 1e-9) for n in pl.FREE)
     with pytest.raises(TrajectoryError, match="noise level"):
         pl.NoiseLevels(x_ch=0.0)
-    assert ev.floor.length == pytest.approx(5.2, abs=1e-3)
 
 
 def test_default_for_floor_fits_the_floor_and_duration():
