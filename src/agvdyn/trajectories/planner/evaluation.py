@@ -84,7 +84,8 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             v = seg.s_dot[:, j]
             th = settings.threshold(coord)
             if validity:
-                keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings).wU
+                keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings,
+                                      settings.noise.saturation).wU
                 keep = keep_w > 1e-6
             else:
                 keep = _guarded(np.abs(v) >= th, guard)

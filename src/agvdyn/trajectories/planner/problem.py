@@ -195,7 +195,7 @@ class _Problem:
         s, kind, i_star, peak = self.scale(j, c, T)
         v0, a0 = B.Cv @ c, B.Ca @ c / T
         v, a = s * v0, s * a0
-        wts = _row_weights(v, a, m.threshold, m.knee, self.settings)
+        wts = _row_weights(v, a, m.threshold, m.knee, self.settings, self.settings.noise.saturation)
         Z = np.stack([a, v, np.sign(v), np.ones_like(v)], axis=1)
         unit = T / B.n / self.Ts
         M = unit * (Z * wts.wU[:, None]).T @ Z
@@ -341,7 +341,8 @@ class _Weights:
     pen_a: np.ndarray
 
 
-def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanSettings) -> _Weights:
+def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanSettings,
+                 saturation: float = math.inf) -> _Weights:
     """Weights of the rows of a phase (``wU``: in F and in cond; ``wO``: in Omega, the rows' variance)
     and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
 
@@ -353,7 +354,8 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
       (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
       ``reversal_penalty`` per share of the time;
     * the time below the validity speed costs ``band_penalty`` per share;
-    * the row's variance factor ``q = 1 + (a / knee)^4`` (:class:`NoiseLevels`): ``wO = wU q``.
+    * the row's variance factor ``q = 1 + g / (1 + g / saturation)``, ``g = (a / knee)^4``
+      (:class:`NoiseLevels`): ``wO = wU q``.
     """
     V, A = np.abs(v), np.abs(a)
     sv, sa = np.sign(v), np.sign(a)
@@ -371,8 +373,10 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
     k_V = dk1 * k2 - k1 * dk2
     k_A = -g * dk1 * k2 + st.reversal_window * k1 * dk2
     if math.isfinite(knee):
-        q = 1 + (a / knee) ** 4
-        q_a = 4 * a**3 / knee**4
+        g4 = (a / knee) ** 4
+        den = 1 + g4 / saturation
+        q = 1 + g4 / den
+        q_a = 4 * a**3 / knee**4 / den**2
     else:
         q, q_a = np.ones_like(a), np.zeros_like(a)
     wU = wv * (1 - k)

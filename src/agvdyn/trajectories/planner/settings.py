@@ -35,8 +35,10 @@ class NoiseLevels:
     """Effective noise of one row of eq. (19) (2 ms rows) per generalized coordinate: N m for the
     steering and the yaw, N for x_ch and y_ch, and how it grows with the acceleration.
 
-    The effective variance of a row is ``level^2 (1 + (a / knee)^4)`` with the row's acceleration
-    ``a`` of its coordinate (rad/s^2, m/s^2; ``knee`` inf: constant). "Effective" is the residual
+    The effective variance of a row is ``level^2 (1 + g / (1 + g / saturation))``,
+    ``g = (a / knee)^4``, with the row's acceleration ``a`` of its coordinate (rad/s^2, m/s^2;
+    ``knee`` inf: constant): it grows as ``a^4`` from the knee on and at most ``1 + saturation``
+    times (the calibration reaches ``a ~ 2.3 knee``; beyond it the growth is not measured). "Effective" is the residual
     variance times its correlation time: the identification's residuals are correlated over
     tens to hundreds of samples, and their long-run variance is what the std sees.
     The growth is the model error of the plant, not sensor noise: the tyres slip and twist in
@@ -51,22 +53,23 @@ class NoiseLevels:
     alone as nominal noise (``predicted_relative_std``). Only their ratios matter for the plan.
     """
 
-    alpha_l: float = 0.55
-    alpha_r: float = 0.78
-    alpha_v: float = 0.78
-    x_ch: float = 9.1
-    y_ch: float = 9.1
-    gamma_ch: float = 8.6
-    knee_alpha_l: float = 14.0
-    knee_alpha_r: float = 5.4
-    knee_alpha_v: float = 5.4
-    knee_x_ch: float = 0.29
-    knee_y_ch: float = 0.29
-    knee_gamma_ch: float = 0.66
+    alpha_l: float = 0.54
+    alpha_r: float = 0.76
+    alpha_v: float = 0.76
+    x_ch: float = 10.1
+    y_ch: float = 10.1
+    gamma_ch: float = 8.95
+    knee_alpha_l: float = 13.4
+    knee_alpha_r: float = 5.9
+    knee_alpha_v: float = 5.9
+    knee_x_ch: float = 0.314
+    knee_y_ch: float = 0.314
+    knee_gamma_ch: float = 0.67
+    saturation: float = 100.0
 
     def __post_init__(self) -> None:
         for key, value in self.__dict__.items():
-            knee = key.startswith("knee_")
+            knee = key.startswith("knee_") or key == "saturation"
             if not (isinstance(value, (int, float)) and not math.isnan(value) and value > 0
                     and (knee or math.isfinite(value))):
                 raise TrajectoryError(f"noise level {key}={value!r}: expected a finite number > 0"
@@ -86,10 +89,13 @@ class NoiseLevels:
         return 0.0 if math.isinf(knee) else self.of(coordinate) / knee**2
 
     def variance_factor(self, coordinate: str, a: np.ndarray) -> np.ndarray:
-        """``1 + (a / knee)^4`` per row: the row's effective variance over ``level^2``."""
+        """The row's effective variance over ``level^2`` (see the class)."""
         knee = self.knee(coordinate)
         a = np.asarray(a, dtype=float)
-        return np.ones_like(a) if math.isinf(knee) else 1 + (a / knee) ** 4
+        if math.isinf(knee):
+            return np.ones_like(a)
+        g = (a / knee) ** 4
+        return 1 + g / (1 + g / self.saturation)
 
 
 @dataclass(frozen=True)
