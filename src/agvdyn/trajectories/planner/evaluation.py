@@ -141,7 +141,8 @@ def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, l
         for k, i in enumerate(free):
             if i < n_p:
                 std[i] = d[k]
-        r = cov / np.outer(d, d)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = cov / np.outer(d, d)
         for p_, q_ in (("d_vl", "d_cl"), ("d_vr", "d_cr"), ("d_vw", "d_cw"), ("C_r", "C_ch"), ("C_l", "C_ch")):
             i, j = free.index(FREE.index(p_)), free.index(FREE.index(q_))
             corr[f"{p_}/{q_}"] = float(r[i, j])
