@@ -15,7 +15,10 @@ regressor ``H_k^T Theta`` of a phase with constant ``H_k`` (modes 1, 4 and strai
 motor-torque offsets the identification estimates with them). The information matrix of the
 sequence is therefore ``F = sum_phases P^T M P / sigma^2`` with the phase's ``4 x 4`` moment
 matrix ``M = sum_t w_t z_t z_t^T`` and the noise level ``sigma`` of its generalized coordinate
-(:class:`NoiseLevels`, growing with the acceleration in translation: tyre slip). The weight ``w``
+(:class:`NoiseLevels`). The rows' effective variance grows with the acceleration (the plant's
+model error: tyre slip and twist), so the covariance is the sandwich ``F^-1 Omega F^-1`` of the
+identification's one-weight-per-coordinate estimator, ``Omega`` the moments times each row's
+variance factor; calibrated on the jackknife std of the simulator (docs/planning.md). The weight ``w``
 of a row (:func:`_row_weights`) keeps the plan where the model is true: rows below ``validity``
 times the identification's stiction threshold earn no credit (slow motion: stick/slip), nor do
 rows the identification keeps within ``reversal_window`` of a velocity reversal (the reversal's
@@ -24,11 +27,11 @@ stick, spread by the zero-phase filter); the time spent in either is penalised.
 Objectives (``PlanSettings.objective``), each plus those validity penalties:
 
 * ``std`` (default): the mean of ``log(std_i / |p_i|)`` over the ten parameters (the predicted
-  relative standard deviations, from ``F^-1``), with a penalty on every parameter whose predicted
+  relative standard deviations, from the sandwich), with a penalty on every parameter whose predicted
   std exceeds ``reference_margin`` times the one of the default sequence in the same floor and
   duration, and on ``cond(Theta_1w^T Theta_1w)`` above ``cond_target``. It trades conditioning
   against precision and the model's validity.
-* ``d-optimal``: ``log det`` of the parameters' covariance (offsets eliminated).
+* ``d-optimal``: ``log det`` of the parameters' covariance (the sandwich's block of the ten).
 * ``cond``: ``log cond(Theta_1w^T Theta_1w)`` of the column-scaled regressor (eq. 25).
 
 The gradient is analytic (chain rule through the moments, the Fourier basis and the scaling of

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,9 +15,6 @@ from agvdyn.trajectories.fourier import FourierSeries
 from agvdyn.trajectories.limits import FloorSpace, Limits
 from agvdyn.trajectories.segments import Trajectory, alignment
 from agvdyn.trajectories.planner.settings import _OFFSETS, PHASES, PlanSettings
-
-if TYPE_CHECKING:
-    pass
 
 
 @dataclass(frozen=True, eq=False)
@@ -408,6 +404,3 @@ def _log_cond(U: np.ndarray) -> tuple[float, np.ndarray]:
         grad = np.outer(dv, dv) - lam[idx] * np.diag(v**2 * d**2)
         out += sign * grad / lam[idx]
     return float(np.log(lam[-1] / lam[0])), out
-
-
-# --- exact evaluation of a sequence ----------------------------------------------------------------

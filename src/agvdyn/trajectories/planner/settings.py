@@ -126,8 +126,8 @@ class PlanSettings:
     max_acceleration : largest chassis acceleration of the straight motion, m/s^2 (below
         ``Limits.acceleration``), for the same reason (tyre slip grows with the force).
     reference_margin : the ``std`` objective penalises a predicted std above ``reference_margin``
-        times the default sequence's: the prediction of the chassis rows is optimistic where a plan
-        leaves the default's regime (slowly varying tyre errors inflate the HAC std).
+        times the default sequence's: room for the prediction's errors (15-20 %) and the scatter
+        of a single run's jackknife std (8-16 %), so that single runs beat the default too.
     steering_threshold, stiction_threshold, stiction_guard : the identification's stiction
         thresholds (rad/s steering; m/s, rad/s chassis) and guard (s) used to predict which rows
         it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05, 2 / 40 rad/s).
