@@ -171,21 +171,19 @@ def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
 
 def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool = False,
                    per_log: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Per recording (``per_log``: per log), the weighted Gram ``A_b^T W A_b`` (nb, p, p) and
-    ``A_b^T W y_b`` (nb, p) of its non-overlapping blocks of L sample steps (per recording: counted
-    from its first step, empty blocks included; per log: blocks without rows left out); with
-    ``residuals``, the score sums ``A_b^T W r_b`` instead (no cancellation).
-
-    Blocks are cut at multiples of L of the log's sample index, so that with ``per_log`` the
-    stretches of a log and the pieces a long log is read in (recordings that follow each other with
-    increasing steps) share one partition: a long log read in pieces gets the whole log's blocks."""
+    """The weighted Gram ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p) of non-overlapping
+    blocks of L sample steps; with ``residuals``, the score sums ``A_b^T W r_b`` instead (no
+    cancellation). Per recording (the bootstrap's strata): blocks counted from its first step, empty
+    ones included. ``per_log``: blocks cut at multiples of L of the log's sample index, without rows
+    left out, and a block that a recording shares with the next one of the same log (stretches and
+    the pieces a long log is read in follow each other with increasing steps) summed over both, so
+    a long log read in pieces gets the whole log's blocks; yielded as they complete (memory does
+    not grow with the log)."""
     p = data.A.shape[1]
-    run: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
     last_step = None
     for rec, w in _recording_weights(est, data):
-        if run and (not per_log or rec.step.min() <= last_step):  # a new recording / steps start again: a new log
-            yield _merged_blocks(run, p)
-            run = []
+        new_log = last_step is None or rec.step.min() <= last_step  # steps start again: another log
         last_step = int(rec.step.max())
         block = rec.step // L if per_log else (rec.step - rec.step.min()) // L
         ys = rec.y - rec.A @ est.coef_ if residuals else rec.y
@@ -193,11 +191,19 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
         if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
             G_all, b_all = np.zeros((int(block.max()) + 1, p, p)), np.zeros((int(block.max()) + 1, p))
             G_all[ids], b_all[ids] = G, b
-            run.append((np.arange(G_all.shape[0]), G_all, b_all))
-        else:
-            run.append((ids, G, b))
-    if run:
-        yield _merged_blocks(run, p)
+            yield G_all, b_all
+            continue
+        if pending is not None:
+            if not new_log and ids[0] == pending[0]:  # the previous recording's last block goes on here
+                G[0] += pending[1]
+                b[0] += pending[2]
+            else:
+                yield pending[1][None], pending[2][None]
+        if ids.size > 1:
+            yield G[:-1], b[:-1]
+        pending = (int(ids[-1]), G[-1], b[-1])
+    if pending is not None:
+        yield pending[1][None], pending[2][None]
 
 
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
@@ -213,20 +219,6 @@ def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
     for j, (a, e) in enumerate(zip(bounds[:-1], bounds[1:])):
         np.matmul(Aw[a:e].T, Ay[a:e], out=moments[j])
     return block[order][bounds[:-1]], moments[:, :, :-1], moments[:, :, -1]
-
-
-def _merged_blocks(run: list[tuple[np.ndarray, np.ndarray, np.ndarray]], p: int) -> tuple[np.ndarray, np.ndarray]:
-    """Block moments of consecutive recordings of one log, summed where they share a block."""
-    ids = np.concatenate([r[0] for r in run])
-    G = np.concatenate([r[1] for r in run])
-    b = np.concatenate([r[2] for r in run])
-    if np.all(np.diff(ids) > 0):
-        return G, b
-    uniq, inv = np.unique(ids, return_inverse=True)
-    Gm, bm = np.zeros((uniq.size, p, p)), np.zeros((uniq.size, p))
-    np.add.at(Gm, inv, G)
-    np.add.at(bm, inv, b)
-    return Gm, bm
 
 
 def _bootstrap(est: Estimator, data: RegressionData, L: int, replicates: int, seed: int) -> np.ndarray:
