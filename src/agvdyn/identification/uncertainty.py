@@ -257,7 +257,7 @@ def _jackknife(est: Estimator, data: RegressionData, L: int) -> tuple[np.ndarray
     half = (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T  # B^(1/2)
     p = B.shape[0]
     cov = np.zeros((p, p))
-    c_sum, c_sq = np.zeros(p), np.zeros(p)
+    c_sq = np.zeros(p)  # sum_b d_b^4 per parameter (sum_b d_b^2 is the diagonal of cov)
     leverages: list[np.ndarray] = []
     capped: set[int] = set()
     for G, S in _block_moments(est, data, L, residuals=True, per_log=True):  # S: block score sums A_b^T W r_b
@@ -271,10 +271,9 @@ def _jackknife(est: Estimator, data: RegressionData, L: int) -> tuple[np.ndarray
         x /= 1.0 - np.minimum(h, MAX_LEVERAGE)
         d = np.einsum("ij,bj->bi", half, np.einsum("bij,bj->bi", Q, x))  # B (I - G_b B)^-1 S_b
         cov += d.T @ d
-        c_sum += (d**2).sum(axis=0)
         c_sq += (d**4).sum(axis=0)
     lev = np.concatenate(leverages)
-    dof = np.where(c_sq > 0, 3.0 * c_sum**2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
+    dof = np.where(c_sq > 0, 3.0 * np.diag(cov) ** 2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
     return cov, dof, {"blocks": int(lev.size), "block_steps": L, "max_block_leverage": float(lev.max()),
                       "blocks_above_half_leverage": int(np.count_nonzero(lev > LEVERAGE_WARNING)),
                       "single_block_columns": sorted(capped)}
