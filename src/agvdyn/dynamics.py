@@ -14,7 +14,6 @@ from agvdyn.kinematics import (
     MODE_TOLERANCE,
     N_Q,
     Mode,
-    _rows,
     admissible_basis,
     as_alpha,
     car_like_model_into,
@@ -24,7 +23,12 @@ from agvdyn.kinematics import (
     kinematic_model,
     max_virtual_angle,
 )
+from agvdyn.kinematics.constraints import _rows
+from agvdyn._numba_cache import drop_stale_cache
+from agvdyn.kinematics import constraints, models
 from agvdyn.platform import EPSILON, PARAMETER_NAMES, Geometry, Parameters
+
+drop_stale_cache(__file__, constraints.__file__, models.__file__)  # compiled callees in those files
 
 N_P = len(PARAMETER_NAMES)
 _I = {name: i for i, name in enumerate(PARAMETER_NAMES)}

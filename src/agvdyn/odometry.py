@@ -6,7 +6,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from agvdyn.kinematics import _rows, as_alpha, constraint_matrix_into
+from agvdyn.kinematics import as_alpha, constraint_matrix_into
+from agvdyn.kinematics.constraints import _rows
+from agvdyn._numba_cache import drop_stale_cache
+from agvdyn.kinematics import constraints
+
+drop_stale_cache(__file__, constraints.__file__)
 from agvdyn.platform import Geometry
 
 __all__ = ["odometry", "odometry_with_slip"]

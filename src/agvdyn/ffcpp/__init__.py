@@ -17,7 +17,8 @@ from typing import Literal
 
 import numpy as np
 
-from agvdyn.kinematics import MODE_TOLERANCE, STOP_TOLERANCE, Mode, _rows
+from agvdyn.kinematics import MODE_TOLERANCE, STOP_TOLERANCE, Mode
+from agvdyn.kinematics.constraints import _rows
 from agvdyn.platform import EPSILON, Geometry, Parameters
 
 __all__ = ["Engine", "ENGINES", "CppEngineUnavailable", "available", "extension", "check_engine",

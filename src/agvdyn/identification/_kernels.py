@@ -20,7 +20,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from agvdyn.kinematics import car_like_model_into, icr_state_trig, wheel_frame
+from agvdyn._numba_cache import drop_stale_cache
+from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, models, wheel_frame
+
+drop_stale_cache(__file__, constraints.__file__, models.__file__)
 
 __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
 

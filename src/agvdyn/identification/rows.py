@@ -31,7 +31,8 @@ from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretches_of
 from agvdyn.identification.workspace import Workspace, empty
-from agvdyn.kinematics import Mode, _constant_model, max_virtual_angle, nominal_steering
+from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering
+from agvdyn.kinematics.models import _constant_model
 from agvdyn.platform import Geometry
 from agvdyn.signals import row_max_abs, runs
 

@@ -1,9 +1,10 @@
 """Compiled kernels of the simulation (numba): plant step, sensors, controller step, closed loop.
 
-They live in one module on purpose: numba's on-disk cache (``cache=True``) is invalidated only
-when the file of the cached function changes, not when a function it calls in another file
-does. Keeping every kernel in this file means an edit anywhere recompiles everything (hence
-the length of the file).
+They live in one module on purpose, hence its length: split into a plant module and a closed-loop
+module (tried: run_chunk calling plant_step and the constraint helpers across files), the closed
+loop ran 5-8 % slower (146-166 against 142-154 ms for the identification sequence, alternating
+runs), which takes `simulate` below issue 12's 500x real time on this machine. (numba's cache
+staleness across files is handled by :mod:`agvdyn._numba_cache` where kernels do call across files.)
 The physics and the design choices are documented in plant.py, sensors.py and controller.py.
 
 Speed (issue 12): the whole closed loop runs in :func:`run_chunk`, no Python per sample; a plant

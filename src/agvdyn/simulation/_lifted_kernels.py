@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from agvdyn._numba_cache import drop_stale_cache
+from agvdyn.simulation import _kernels
 from agvdyn.simulation._kernels import _BW, _DCW, _DVW, _IG, _TLIM, _friction_terms, read_sensors
+
+drop_stale_cache(__file__, _kernels.__file__)
+
 
 @njit(cache=True)
 def run_lifted_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res, u_ff, beta_d, beta_dot_d,
