@@ -199,7 +199,7 @@ def run_job(job: BatchJob) -> list[dict[str, Any]]:
 
         settings = job.identification_settings()
         ident = identify(list(job.logs), job.platform, fixed=job.fixed(), settings=settings, mapping=job.mapping,
-                         keep_blocks=False)
+                         keep_blocks=False, workers=1)  # one thread per Dask worker process
     except Exception as exc:  # noqa: BLE001 - a failed job is a row, never a failed batch
         return [_error_row(job, _message(exc), time.perf_counter() - t0)]
     seconds = time.perf_counter() - t0

@@ -75,7 +75,7 @@ def run_study_case(case: StudyCase) -> list[dict[str, Any]]:
         error = ""
         try:
             ident = identify(log, geometry, settings=IdentificationSettings(
-                estimator=estimator, uncertainty=uncertainty, **(case.options or {})), keep_blocks=False)
+                estimator=estimator, uncertainty=uncertainty, **(case.options or {})), keep_blocks=False, workers=1)
         except ValueError as exc:
             ident, error = None, str(exc).splitlines()[0]
         seconds = time.perf_counter() - t0

@@ -86,10 +86,10 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
                    settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
                    blocks: Sequence[EquationBlock] = (), sources: Iterable[str] = (), notes: Iterable[str] = (),
                    n_samples: int = 0, rows: RowCounts | None = None, slip_events: Sequence[SlipEvent] = (),
-                   slip_thresholds: Mapping[str, float] | None = None) -> Identification:
+                   slip_thresholds: Mapping[str, float] | None = None, workers: int = 1) -> Identification:
     """Regression stage: the stacked system of eq. (22) with the fixed parameters to the right
-    (eq. 24), rank check naming what is not excited, scaled least squares (eq. 25), uncertainty,
-    physical plausibility."""
+    (eq. 24), rank check naming what is not excited, scaled least squares (eq. 25), uncertainty
+    (``workers`` threads), physical plausibility."""
     fixed = check_fixed(fixed)
     with_offsets = settings.torque_offsets
     names, free, idx_free, p_fixed = columns(fixed, with_offsets)
@@ -129,7 +129,7 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
                                 replicates=settings.bootstrap_replicates, seed=settings.seed,
-                                names=free, reported=PARAMETER_NAMES)
+                                names=free, reported=PARAMETER_NAMES, workers=workers)
     sd_all = unc.std
     warnings += unc.warnings
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset

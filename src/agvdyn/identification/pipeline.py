@@ -7,9 +7,7 @@ import functools
 import math
 import os
 import threading
-from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -27,6 +25,7 @@ from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
 from agvdyn.identification.rows import RowCounts, labels_present, log_rows
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
+from agvdyn.identification._threads import default_workers, ordered_map
 from agvdyn.identification.workspace import Workspace, keep_freed_memory
 from agvdyn.identification.slip import SlipEvent
 from agvdyn.identification.equations import EquationBlock
@@ -90,7 +89,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
     mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
     keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
-    workers : threads that read and reduce logs at once (default :func:`default_workers`: 1); the
+    workers : threads that read and reduce logs at once (default :func:`default_workers`: the cores, at most 4); the
         result does not depend on it (logs are merged in their order).
 
     The first call asks glibc to keep freed memory for reuse (:func:`.workspace.keep_freed_memory`).
@@ -182,13 +181,6 @@ class _LogStream:
         return log, None
 
 
-def default_workers() -> int:
-    """Threads that read and reduce logs at once by default: 1. Two threads give 1.3-1.5x on the
-    row stage of a 2-core machine that is otherwise idle (nothing on a busy one) for ~60-130 MB more
-    peak memory; pass ``workers=`` to use them."""
-    return 1
-
-
 def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: IdentificationSettings, width: int,
                   order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
     """``(log, core, rows, reduction)`` of every log of the stream, in order: read, filtered, rows
@@ -209,21 +201,7 @@ def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: Identificati
             rows = dataclasses.replace(rows, blocks=())
         return log, core, rows, reduction
 
-    if workers <= 1:
-        for job in stream.jobs():
-            yield work(job)
-        return
-    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="agvdyn-identify")
-    try:
-        pending: deque = deque()
-        for job in stream.jobs():
-            pending.append(pool.submit(work, job))
-            if len(pending) > workers:
-                yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    yield from ordered_map(work, stream.jobs(), workers, "agvdyn-identify")
 
 
 def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, float],
@@ -271,7 +249,7 @@ def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, f
         data = regression_data(stats, names, idx_free, p_fixed, store)
         return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
                               sources=sources, notes=notes, n_samples=n_samples, rows=counts, slip_events=events,
-                              slip_thresholds=thresholds)
+                              slip_thresholds=thresholds, workers=workers)
     finally:
         store.close()
 

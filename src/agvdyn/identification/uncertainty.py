@@ -40,6 +40,7 @@ from collections.abc import Iterable, Iterator, Sequence
 import numpy as np
 import scipy.fft
 
+from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
 
@@ -133,12 +134,12 @@ def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_s
         if pooled >= 4 * max_steps:
             break
         p = x.shape[1]
-        x = x[:max_steps]
-        pooled += x.shape[0]
-        n = x.shape[0]
+        x = np.ascontiguousarray(x[:max_steps].T, dtype=np.float32)  # single precision: ~7 digits of rho
+        n = x.shape[1]
+        pooled += n
         size = scipy.fft.next_fast_len(2 * n, real=True)
-        f = scipy.fft.rfft(x, size, axis=0, workers=-1)
-        c = scipy.fft.irfft(f * np.conj(f), size, axis=0, workers=-1)[:n]
+        f = scipy.fft.rfft(x, size, axis=1, workers=-1)
+        c = scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=-1)[:, :n].T.astype(float)
         acf = c if acf is None else _pad_add(acf, c)
     rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
     tau = np.ones(p)
@@ -170,7 +171,7 @@ def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
 
 
 def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool = False,
-                   per_log: bool = False) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+                   per_log: bool = False, workers: int = 1) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """The weighted Gram ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p) of non-overlapping
     blocks of L sample steps; with ``residuals``, the score sums ``A_b^T W r_b`` instead (no
     cancellation). Per recording (the bootstrap's strata): blocks counted from its first step, empty
@@ -178,18 +179,22 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
     left out, and a block that a recording shares with the next one of the same log (stretches and
     the pieces a long log is read in follow each other with increasing steps) summed over both, so
     a long log read in pieces gets the whole log's blocks; yielded as they complete (memory does
-    not grow with the log)."""
+    not grow with the log). ``workers``: threads summing the recordings' blocks (in order)."""
     p = data.A.shape[1]
-    pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
-    last_step = None
-    for rec, w in _recording_weights(est, data):
-        new_log = last_step is None or rec.step.min() <= last_step  # steps start again: another log
-        last_step = int(rec.step.max())
+
+    def sums(item: tuple[RecordingRows, np.ndarray]) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
+        rec, w = item
         block = rec.step // L if per_log else (rec.step - rec.step.min()) // L
         ys = rec.y - rec.A @ est.coef_ if residuals else rec.y
-        ids, G, b = _block_sums(block, rec.A, w, ys)
+        return (int(rec.step.min()), int(rec.step.max()), *_block_sums(block, rec.A, w, ys))
+
+    pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
+    last_step = None
+    for first, last, ids, G, b in ordered_map(sums, _recording_weights(est, data), workers, "agvdyn-blocks"):
+        new_log = last_step is None or first <= last_step  # steps start again: another log
+        last_step = last
         if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
-            G_all, b_all = np.zeros((int(block.max()) + 1, p, p)), np.zeros((int(block.max()) + 1, p))
+            G_all, b_all = np.zeros((int(ids[-1]) + 1, p, p)), np.zeros((int(ids[-1]) + 1, p))
             G_all[ids], b_all[ids] = G, b
             yield G_all, b_all
             continue
@@ -208,17 +213,21 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
 
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block ids present and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p)
-    (one BLAS product per block: faster than a padded batched product for blocks of hundreds of rows)."""
-    order = np.argsort(block, kind="stable")
-    cuts = np.flatnonzero(np.diff(block[order])) + 1
-    bounds = np.concatenate([[0], cuts, [block.size]])
-    Ay = np.column_stack([A[order], y[order]])
-    Aw = A[order] * w[order][:, None]
-    moments = np.empty((bounds.size - 1, A.shape[1], A.shape[1] + 1))
-    for j, (a, e) in enumerate(zip(bounds[:-1], bounds[1:])):
-        np.matmul(Aw[a:e].T, Ay[a:e], out=moments[j])
-    return block[order][bounds[:-1]], moments[:, :, :-1], moments[:, :, -1]
+    """Block ids present (sorted) and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b``
+    (nb, p): one BLAS product per run of rows of one block (the rows come per coordinate in time
+    order, so a block is a few runs; no sort and no reordered copy of the rows)."""
+    p = A.shape[1]
+    bounds = np.concatenate([[0], np.flatnonzero(np.diff(block)) + 1, [block.size]])
+    ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
+    Ay = np.empty((A.shape[0], p + 1))
+    Ay[:, :p], Ay[:, p] = A, y
+    Aw = A * w[:, None]
+    moments = np.zeros((ids.size, p, p + 1))
+    part = np.empty((p, p + 1))
+    for j, a, e in zip(which.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
+        np.matmul(Aw[a:e].T, Ay[a:e], out=part)
+        moments[j] += part
+    return ids, moments[:, :, :-1], moments[:, :, -1]
 
 
 def _bootstrap(est: Estimator, data: RegressionData, L: int, replicates: int, seed: int) -> np.ndarray:
@@ -249,7 +258,21 @@ LEVERAGE_WARNING = 0.5
 MAX_LEVERAGE = 0.95
 
 
-def _jackknife(est: Estimator, data: RegressionData, L: int) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+def _largest_leverage(M: np.ndarray, trace: np.ndarray, top: float, batch: int = 16) -> float:
+    """max(top, largest eigenvalue of the blocks M (nb, p, p)), visiting blocks by decreasing trace
+    (an upper bound of a positive semi-definite block's largest eigenvalue) while it can exceed top."""
+    order = np.argsort(-trace)
+    for i in range(0, order.size, batch):
+        ids = order[i:i + batch]
+        ids = ids[trace[ids] > top]
+        if not ids.size:
+            break
+        top = max(top, float(np.linalg.eigvalsh(M[ids])[:, -1].max()))
+    return top
+
+
+def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
+               ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Delete-one-block jackknife (CR3) covariance over blocks of L steps, the degrees of freedom of
     each variance and the leverage figures."""
     B = est.bread_
@@ -258,37 +281,47 @@ def _jackknife(est: Estimator, data: RegressionData, L: int) -> tuple[np.ndarray
     p = B.shape[0]
     cov = np.zeros((p, p))
     c_sq = np.zeros(p)  # sum_b d_b^4 per parameter (sum_b d_b^2 is the diagonal of cov)
-    leverages: list[np.ndarray] = []
+    top, above, blocks = 0.0, 0, 0
     capped: set[int] = set()
-    for G, S in _block_moments(est, data, L, residuals=True, per_log=True):  # S: block score sums A_b^T W r_b
+    for G, S in _block_moments(est, data, L, residuals=True, per_log=True, workers=workers):  # S: block score sums A_b^T W r_b
         M = half @ G @ half  # B^1/2 G_b B^1/2, eigenvalues = block leverages
-        h, Q = np.linalg.eigh((M + np.swapaxes(M, 1, 2)) / 2)
-        leverages.append(h[:, -1])
-        for j in np.flatnonzero(h[:, -1] > MAX_LEVERAGE):  # directions one block alone determines
-            v = np.abs(half @ Q[j, :, -1])
-            capped.update(np.flatnonzero(v > 0.3 * v.max()).tolist())
-        x = np.einsum("bji,bj->bi", Q, np.einsum("ij,bj->bi", half, S))
-        x /= 1.0 - np.minimum(h, MAX_LEVERAGE)
-        d = np.einsum("ij,bj->bi", half, np.einsum("bij,bj->bi", Q, x))  # B (I - G_b B)^-1 S_b
+        M = (M + np.swapaxes(M, 1, 2)) / 2
+        x = np.einsum("ij,bj->bi", half, S)
+        trace = np.einsum("bii->b", M)  # >= the largest leverage (M is positive semi-definite)
+        low = trace <= max(LEVERAGE_WARNING, top)
+        if low.any():  # no leverage near 1: (I - M_b) x = B^1/2 S_b solved directly
+            x[low] = np.linalg.solve(np.eye(p) - M[low], x[low][..., None])[..., 0]
+            top = _largest_leverage(M[low], trace[low], top)
+        high = np.flatnonzero(~low)
+        if high.size:  # the leverages: capped at MAX_LEVERAGE, counted, the largest reported
+            h, Q = np.linalg.eigh(M[high])
+            top = max(top, float(h[:, -1].max()))
+            above += int(np.count_nonzero(h[:, -1] > LEVERAGE_WARNING))
+            for j in np.flatnonzero(h[:, -1] > MAX_LEVERAGE):  # directions one block alone determines
+                v = np.abs(half @ Q[j, :, -1])
+                capped.update(np.flatnonzero(v > 0.3 * v.max()).tolist())
+            z = np.einsum("bji,bj->bi", Q, x[high]) / (1.0 - np.minimum(h, MAX_LEVERAGE))
+            x[high] = np.einsum("bij,bj->bi", Q, z)
+        d = x @ half  # B (I - G_b B)^-1 S_b (half is symmetric)
         cov += d.T @ d
         c_sq += (d**4).sum(axis=0)
-    lev = np.concatenate(leverages)
+        blocks += S.shape[0]
     dof = np.where(c_sq > 0, 3.0 * np.diag(cov) ** 2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
-    return cov, dof, {"blocks": int(lev.size), "block_steps": L, "max_block_leverage": float(lev.max()),
-                      "blocks_above_half_leverage": int(np.count_nonzero(lev > LEVERAGE_WARNING)),
-                      "single_block_columns": sorted(capped)}
+    return cov, dof, {"blocks": blocks, "block_steps": L, "max_block_leverage": top,
+                      "blocks_above_half_leverage": above, "single_block_columns": sorted(capped)}
 
 
 def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data: RegressionData, *,
                           bandwidth: int | None = None, bandwidth_factor: float = 2.0,
                           min_bandwidth: int = 50, replicates: int = 200, seed: int = 0,
-                          names: Sequence[str] | None = None, reported: Iterable[str] = ()) -> Uncertainty:
+                          names: Sequence[str] | None = None, reported: Iterable[str] = (), workers: int = 1
+                          ) -> Uncertainty:
     """Covariance of ``est``'s free parameters by ``method`` (see the module docstring); the rows
     are read one recording at a time from ``data`` (twice: correlation time, then the meat). L is
     the HAC bandwidth and bootstrap block; the jackknife's blocks are 2 L long (the Bartlett window
     of L lags and non-overlapping blocks of 2 L steps cover the same correlations). ``names`` of
     the columns: the jackknife's warning names those in ``reported`` (default: all) whose
-    variance has fewer than MIN_DOF degrees of freedom."""
+    variance has fewer than MIN_DOF degrees of freedom. ``workers``: threads of the jackknife's block sums."""
     reported = set(reported) or set(names or ())
     method = UncertaintyMethod(method)
     if method is UncertaintyMethod.CLASSIC:
@@ -305,7 +338,7 @@ def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data:
         omega = _bartlett_meat(_step_scores(est, data), L, data.A.shape[1])
         cov = est.bread_ @ omega @ est.bread_
     elif method is UncertaintyMethod.JACKKNIFE:
-        cov, dof, more = _jackknife(est, data, 2 * L)
+        cov, dof, more = _jackknife(est, data, 2 * L, workers)
         single = more.pop("single_block_columns")
         details.update(more)
         label = (lambda i: str(names[i]) if names is not None else str(i))
