@@ -15,7 +15,8 @@ from agvdyn.trajectories.experiments import default_excitation, default_periods,
 from agvdyn.trajectories.fourier import FourierSeries
 from agvdyn.trajectories.limits import FloorSpace, Limits, floor_space, limit_report
 from agvdyn.trajectories.segments import Trajectory
-from agvdyn.trajectories.planner.problem import _row_weights, _sequence
+from agvdyn.trajectories.planner.problem import _sequence
+from agvdyn.trajectories.planner.weights import _row_weights
 from agvdyn.trajectories.planner.settings import _OFFSETS, FREE, PlanSettings
 
 if TYPE_CHECKING:

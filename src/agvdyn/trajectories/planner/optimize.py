@@ -26,7 +26,8 @@ from agvdyn.trajectories.planner.evaluation import (
     default_for_floor,
     evaluate_sequence,
 )
-from agvdyn.trajectories.planner.problem import _alignments, _Basis, _log_cond, _phase_models, _Problem, _sequence
+from agvdyn.trajectories.planner.problem import _alignments, _Basis, _phase_models, _Problem, _sequence
+from agvdyn.trajectories.planner.weights import _log_cond
 from agvdyn.trajectories.planner.settings import PlanSettings, parse_floor
 
 if TYPE_CHECKING:
@@ -186,29 +187,32 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
     rng = np.random.default_rng(settings.seed)
     lo, hi = settings.harmonics
     jobs = []
-    base_share = np.array([24.0, 24.0, 30.0, 30.0])
+    periods = list(settings.periods)
+    base_share = np.array([24.0, 24.0, 30.0, 30.0]) * np.sqrt(periods)
     for k in range(settings.starts):
         share = base_share * np.exp(rng.normal(0, 0.3, 4))
         T0 = share / share.sum() * available
         harmonics = []
-        for T in T0:
-            cap = max(lo, int(settings.max_frequency * T / (2 * math.pi)))
+        for T, p in zip(T0, periods):
+            cap = max(lo, int(settings.max_frequency * T / (2 * math.pi * p)))
             harmonics.append(int(rng.integers(lo, min(hi, cap) + 1)))
-        t_min = np.array([max(settings.min_phase, 2 * math.pi * H / settings.max_frequency) for H in harmonics])
+        t_min = np.array([max(settings.min_phase, 2 * math.pi * H * p / settings.max_frequency)
+                          for H, p in zip(harmonics, periods)])
         if t_min.sum() >= available:
             harmonics = [lo] * 4
-            t_min = np.array([max(settings.min_phase, 2 * math.pi * lo / settings.max_frequency)] * 4)
+            t_min = np.array([max(settings.min_phase, 2 * math.pi * lo * p / settings.max_frequency) for p in periods])
         grid_points = [max(200, int(math.ceil(2 * T / settings.grid))) for T in T0]
         frac = np.clip((T0 - t_min) / max(available - t_min.sum(), 1e-9), 1e-3, None)
         eta0 = np.log(frac / frac.sum())
         if k % 2 == 0:  # the default excitation's shape on this phase's harmonics, perturbed
-            thetas = [_default_shape(m.name, H, T, n_) * (1 + 0.2 * k / max(settings.starts, 1))
+            thetas = [_default_shape(m.name, H, T, n_, p) * (1 + 0.2 * k / max(settings.starts, 1))
                       + 0.05 * k / max(settings.starts, 1) * rng.standard_normal(2 * H) / np.tile(np.arange(1, H + 1), 2)
-                      for m, H, T, n_ in zip(models, harmonics, T0, grid_points)]
+                      for m, H, T, n_, p in zip(models, harmonics, T0, grid_points, periods)]
         else:
             thetas = [rng.standard_normal(2 * H) / np.tile(np.arange(1, H + 1), 2) for H in harmonics]
         x0 = np.concatenate([*thetas, eta0])
-        problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points, O0)
+        problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points, O0,
+                        periods)
         jobs.append((problem_args, x0, k))
     workers = settings.workers or min(2, os.cpu_count() or 1)
     if workers > 1 and len(jobs) > 1:
@@ -228,11 +232,11 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
 _LIMITING = ("velocity", "acceleration", "excursion", "motor torque")
 
 
-def _default_shape(name: str, H: int, T: float, n: int) -> np.ndarray:
+def _default_shape(name: str, H: int, T: float, n: int, periods: int = 1) -> np.ndarray:
     """Coefficients (2H,) on the basis of a phase of duration T whose velocity is closest (least
     squares) to the default excitation of that phase repeated over T (a start of the optimiser)."""
     series = default_excitation(name)
-    B = _Basis.of(H, n)
+    B = _Basis.of(H, n, periods)
     t = (np.arange(n) + 0.5) / n * T
     _, v, _ = series.evaluate(t % series.period)
     coef, *_ = np.linalg.lstsq(B.Cv, v / max(np.max(np.abs(v)), 1e-12), rcond=None)
@@ -254,9 +258,12 @@ def _build(problem: _Problem, x: np.ndarray, geom: Geometry, params: Parameters,
     for _ in range(5):
         series = {}
         for name, (c, s, kind, Tp, H) in scales.items():
-            w = 2 * math.pi / Tp
-            # velocity amplitudes of the basis on u = t / T are the same on t
-            series[name] = FourierSeries(w, tuple(s * c[:H]), tuple(s * c[H:]))
+            p = problem.bases[[mm.name for mm in problem.models].index(name)].periods
+            # velocity amplitudes of the basis on u = t / T are the same on t; with p periods the
+            # harmonics p, 2p, ... of the phase (the others zero)
+            a, b = np.zeros(H * p), np.zeros(H * p)
+            a[p - 1::p], b[p - 1::p] = s * c[:H], s * c[H:]
+            series[name] = FourierSeries(2 * math.pi / Tp, tuple(a), tuple(b))
         traj = _sequence(geom, series, settings, dt)
         shrink = _violations(traj, params, limits, problem)
         if not shrink:

@@ -15,6 +15,7 @@ from agvdyn.trajectories.fourier import FourierSeries
 from agvdyn.trajectories.limits import FloorSpace, Limits
 from agvdyn.trajectories.segments import Trajectory, alignment
 from agvdyn.trajectories.planner.settings import _OFFSETS, PHASES, PlanSettings
+from agvdyn.trajectories.planner.weights import _log_cond, _row_weights, _softplus  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,20 +103,22 @@ def _sequence(geom: Geometry, series: dict[str, FourierSeries], settings: PlanSe
 
 @dataclass(frozen=True, eq=False)
 class _Basis:
-    """Fourier basis of one period on a fixed grid ``u = t / T`` in [0, 1): velocity, acceleration
-    times T, position over T; and the projector onto series that start and end at rest."""
+    """Fourier basis of a phase on a fixed grid ``u = t / T`` in [0, 1): velocity, acceleration
+    times T, position over T; and the projector onto series that start and end at rest. With
+    ``periods`` p the harmonics are p, 2p, ..., H p: p repetitions of one period of H harmonics."""
 
     H: int
     n: int
+    periods: int
     Cv: np.ndarray
     Ca: np.ndarray
     Cq: np.ndarray
     Pi: np.ndarray
 
     @classmethod
-    def of(cls, H: int, n: int) -> "_Basis":
+    def of(cls, H: int, n: int, periods: int = 1) -> "_Basis":
         u = (np.arange(n) + 0.5) / n
-        k = np.arange(1, H + 1, dtype=float)
+        k = periods * np.arange(1, H + 1, dtype=float)
         ph = 2 * np.pi * np.outer(u, k)
         s, c = np.sin(ph), np.cos(ph)
         w = 2 * np.pi * k
@@ -128,11 +131,7 @@ class _Basis:
         N[H:, 1] = k
         Q, _ = np.linalg.qr(N)
         Pi = np.eye(2 * H) - Q @ Q.T
-        return cls(H, n, Cv, Ca, Cq, Pi)
-
-
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 0.5 * (1 + np.tanh(0.5 * x))
+        return cls(H, n, periods, Cv, Ca, Cq, Pi)
 
 
 class _Problem:
@@ -140,9 +139,11 @@ class _Problem:
 
     def __init__(self, models: list[_PhaseModel], harmonics: list[int], available: float, settings: PlanSettings,
                  params: np.ndarray, F0: np.ndarray, U0: np.ndarray, reference_log_std: np.ndarray | None,
-                 sample_time: float, grid_points: list[int], O0: np.ndarray | None = None):
+                 sample_time: float, grid_points: list[int], O0: np.ndarray | None = None,
+                 periods: list[int] | None = None):
         self.models = models
-        self.bases = [_Basis.of(H, n) for H, n in zip(harmonics, grid_points)]
+        periods = [1] * len(harmonics) if periods is None else list(periods)
+        self.bases = [_Basis.of(H, n, p) for H, n, p in zip(harmonics, grid_points, periods)]
         self.available = available
         self.settings = settings
         self.log_p = np.log(np.abs(params[:10]))
@@ -150,7 +151,8 @@ class _Problem:
         self.O0 = F0 if O0 is None else O0
         self.ref = reference_log_std
         self.Ts = sample_time
-        self.t_min = np.array([max(settings.min_phase, 2 * math.pi * H / settings.max_frequency) for H in harmonics])
+        self.t_min = np.array([max(settings.min_phase, 2 * math.pi * H * p / settings.max_frequency)
+                               for H, p in zip(harmonics, periods)])
         if self.t_min.sum() >= available:
             raise TrajectoryError(f"{available:.1f} s for the four phases: too short for phases of at least "
                                   f"{', '.join(f'{x:.1f}' for x in self.t_min)} s; expected a longer --duration")
@@ -253,7 +255,7 @@ class _Problem:
         J = float(np.mean(log_rel))
         g = np.full(10, 0.1)  # dJ/dlog_rel
         if self.ref is not None and st.reference_penalty > 0:
-            excess = log_rel - self.ref - math.log(st.reference_margin)
+            excess = log_rel - self.ref - np.log(st.margins())
             sp, dsp = _softplus(excess, 0.05)
             J += st.reference_penalty * float(np.sum(sp ** 2))
             g += st.reference_penalty * 2 * sp * dsp
@@ -320,87 +322,3 @@ class _Problem:
             row = m.K[0, k] * B.Ca[i] / T + m.K[1, k] * B.Cv[i]
         dc += dJ_ds * (-s / peak) * row
         return B.Pi @ dc
-
-
-@dataclass(frozen=True, eq=False)
-class _Weights:
-    """Per-row weights of a phase and their partial derivatives in v and a."""
-
-    wU: np.ndarray
-    wO: np.ndarray
-    pen: np.ndarray
-    wU_v: np.ndarray
-    wU_a: np.ndarray
-    wO_v: np.ndarray
-    wO_a: np.ndarray
-    pen_v: np.ndarray
-    pen_a: np.ndarray
-
-
-def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanSettings,
-                 saturation: float = math.inf) -> _Weights:
-    """Weights of the rows of a phase (``wU``: in F and in cond; ``wO``: in Omega, the rows' variance)
-    and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
-
-    * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
-    * contamination ``k``: a row the identification keeps (more than the guard ``g`` after the
-      velocity passed ``th``) but within ``reversal_window`` of a velocity reversal: there the
-      stick of the reversal, spread by the zero-phase filter, is in the torques. With the
-      acceleration a near the reversal, such rows have ``th + g |a| <= |v| < window |a|``
-      (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
-      ``reversal_penalty`` per share of the time;
-    * the time below the validity speed costs ``band_penalty`` per share;
-    * the row's variance factor ``q = 1 + g / (1 + g / saturation)``, ``g = (a / knee)^4``
-      (:class:`NoiseLevels`): ``wO = wU q``.
-    """
-    V, A = np.abs(v), np.abs(a)
-    sv, sa = np.sign(v), np.sign(a)
-    v_ok = st.validity * th
-    width = st.validity_width * v_ok
-    wv = _sigmoid((V - v_ok) / width)
-    dwv = wv * (1 - wv) / width
-    g = st.stiction_guard
-    d = 0.2 * th
-    k1 = _sigmoid((V - th - g * A) / d)
-    k2 = _sigmoid((st.reversal_window * A - V) / d)
-    k = k1 * k2
-    dk1 = k1 * (1 - k1) / d
-    dk2 = k2 * (1 - k2) / d
-    k_V = dk1 * k2 - k1 * dk2
-    k_A = -g * dk1 * k2 + st.reversal_window * k1 * dk2
-    if math.isfinite(knee):
-        g4 = (a / knee) ** 4
-        den = 1 + g4 / saturation
-        q = 1 + g4 / den
-        q_a = 4 * a**3 / knee**4 / den**2
-    else:
-        q, q_a = np.ones_like(a), np.zeros_like(a)
-    wU = wv * (1 - k)
-    wU_V = dwv * (1 - k) - wv * k_V
-    wU_A = -wv * k_A
-    pen = st.band_penalty * (1 - wv) + st.reversal_penalty * k
-    return _Weights(wU=wU, wO=wU * q, pen=pen, wU_v=sv * wU_V, wU_a=sa * wU_A, wO_v=sv * wU_V * q,
-                    wO_a=sa * wU_A * q + wU * q_a,
-                    pen_v=sv * (-st.band_penalty * dwv + st.reversal_penalty * k_V),
-                    pen_a=sa * st.reversal_penalty * k_A)
-
-
-def _softplus(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """Smooth max(x, 0) of the given width and its derivative."""
-    y = x / width
-    sp = width * np.logaddexp(0.0, y)
-    return sp, _sigmoid(y)
-
-
-def _log_cond(U: np.ndarray) -> tuple[float, np.ndarray]:
-    """log cond of the column-scaled matrix D U D (D = diag(U)^-1/2) and its derivative in U."""
-    d = 1 / np.sqrt(np.diag(U))
-    S = U * np.outer(d, d)
-    lam, V = np.linalg.eigh(S)
-    out = np.zeros_like(U)
-    for idx, sign in ((-1, 1.0), (0, -1.0)):
-        v = V[:, idx]
-        dv = d * v
-        grad = np.outer(dv, dv) - lam[idx] * np.diag(v**2 * d**2)
-        out += sign * grad / lam[idx]
-    return float(np.log(lam[-1] / lam[0])), out

@@ -152,6 +152,7 @@ class PlanSettings:
     seed: int = 0
     workers: int | None = None
     harmonics: tuple[int, int] = (4, 30)
+    periods: tuple[int, int, int, int] = (1, 1, 1, 1)
     max_frequency: float = 10.0
     min_phase: float = 6.0
     steering_excursion: float = 1.2
@@ -159,6 +160,7 @@ class PlanSettings:
     max_speed: float = 0.8
     max_acceleration: float = 0.6
     reference_margin: float = 0.6
+    parameter_margins: tuple[tuple[str, float], ...] = (("m_ch", 0.45), ("C_ch", 0.5), ("d_vw", 0.5), ("d_cw", 0.5))
     steering_threshold: float = 0.1
     stiction_threshold: float = 0.05
     stiction_guard: float = 0.05
@@ -202,8 +204,17 @@ class PlanSettings:
             raise TrajectoryError(f"margin={self.margin!r}: expected a share of the limits in (0, 1]")
         if self.steering_excursion >= math.pi / 2:
             raise TrajectoryError(f"steering_excursion={self.steering_excursion!r}: expected < pi/2 (the stops)")
+        if not (len(self.periods) == len(PHASES) and all(isinstance(p, int) and p >= 1 for p in self.periods)):
+            raise TrajectoryError(f"periods={self.periods!r}: expected {len(PHASES)} integers >= 1 (one per phase)")
         if self.workers is not None and not (isinstance(self.workers, int) and self.workers >= 1):
             raise TrajectoryError(f"workers={self.workers!r}: expected an integer >= 1 or None")
+
+    def margins(self) -> np.ndarray:
+        """``reference_margin`` of each of the ten parameters (``parameter_margins`` override it by name)."""
+        out = np.full(len(FREE), float(self.reference_margin))
+        for name, value in self.parameter_margins:
+            out[FREE.index(name)] = float(value)
+        return out
 
     def threshold(self, coordinate: str) -> float:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
