@@ -33,13 +33,13 @@ def _log(result) -> Log:
     return Log.from_frame(result.log_frame(), sidecar=result.sidecar())
 
 
-def _problem(objective: str, seed: int = 1) -> tuple[pl._Problem, np.ndarray]:
+def _problem(objective: str, seed: int = 1, periods=None) -> tuple[pl._Problem, np.ndarray]:
     settings = pl.PlanSettings(objective=objective)
     models = pl._phase_models(PROTOTYPE, P, FloorSpace(5.2, 1.6), Limits(), settings)
     rng = np.random.default_rng(seed)
     harmonics = [6, 7, 5, 6]
     problem = pl._Problem(models, harmonics, 100.0, settings, P.to_vector(), np.eye(14) * 1e3, np.eye(10) * 1e2,
-                          np.full(10, -5.0), 0.002, [1500] * 4)
+                          np.full(10, -5.0), 0.002, [1500] * 4, None, periods)
     x = np.concatenate([rng.standard_normal(2 * h) for h in harmonics] + [0.3 * rng.standard_normal(4)])
     return problem, x
 
@@ -55,6 +55,25 @@ def test_objective_gradient_matches_finite_differences(objective):
     fd = np.array([(problem.objective(x + e) - problem.objective(x - e)) / (2 * h) for e in np.eye(x.size) * h])
     err = np.abs(g - fd) / (np.abs(fd).max() + 1e-12)
     assert np.median(err) < 1e-5 and np.quantile(err, 0.9) < 1e-3
+
+
+def test_objective_gradient_with_repeated_periods():
+    """A phase of p periods (harmonics p, 2p, ...): the same gradient check; the built series repeats."""
+    problem, x = _problem("std", periods=[1, 1, 2, 1])
+    J, g = problem(x)
+    h = 1e-6
+    fd = np.array([(problem.objective(x + e) - problem.objective(x - e)) / (2 * h) for e in np.eye(x.size) * h])
+    err = np.abs(g - fd) / (np.abs(fd).max() + 1e-12)
+    assert np.median(err) < 1e-5 and np.quantile(err, 0.9) < 1e-3
+    with pytest.raises(TrajectoryError, match="periods"):
+        pl.PlanSettings(periods=(1, 1, 0, 1))
+
+
+def test_parameter_margins():
+    margins = dict(zip(pl.FREE, pl.PlanSettings().margins()))
+    assert margins["m_ch"] == 0.45 and margins["d_cw"] == 0.5 and margins["C_l"] == 0.6
+    flat = pl.PlanSettings(parameter_margins=(), reference_margin=0.7).margins()
+    np.testing.assert_allclose(flat, 0.7)
 
 
 def test_planner_thresholds_are_the_identification_defaults():
@@ -171,22 +190,23 @@ def test_b_w_from_car_like_motion_is_hardly_determined():
 
 # --- acceptance on the simulator ------------------------------------------------------------------
 
-#: Noise seeds of the acceptance runs (each sequence simulated and identified once per seed).
-SEEDS = (1, 2, 3)
+#: Noise seeds of the acceptance runs (each sequence simulated and identified once per seed); 0 is the
+#: CLI's default (``agvdyn plan --seed 0``, ``agvdyn simulate --seed 0``).
+SEEDS = (0, 1, 2, 3)
 
 
 @pytest.fixture(scope="module")
 def acceptance():
     """The plan in the default sequence's own floor (5.2 m x 1.6 m) and duration, and the default
     sequence, each simulated (default plant) and identified with the defaults of ``identify`` (wls,
-    jackknife std) on seeds 1-3.
+    jackknife std) on seeds 0-3.
 
-    What holds (docs/planning.md, measured on seeds 1-6): cond 8.0 (default 17.4); every parameter
-    within 5 % of the truth; the mean over seeds of planned / default std below 1 for every parameter
-    (largest d_cw 0.92, m_ch 0.83, the others 0.50-0.72); every std no larger than the default
-    sequence's on seeds 1-4, **not on seeds 5 (d_cw 1.09x) and 6 (m_ch 1.06x, d_cw 1.02x)**: the
-    criterion "every std no larger" holds on average, not on every single run. The predicted stds
-    (``evaluate_sequence``) are within 0.85-1.21x the jackknife ones on both sequences."""
+    What holds (docs/planning.md, measured on seeds 0-8): cond 7.78 (default 17.4); every parameter
+    within 5 % of the truth (largest C_r -4.1 %); the mean over seeds 0-8 of planned / default std
+    below 1 for every parameter (largest m_ch 0.81, d_cw 0.79, the others 0.41-0.70); every std no
+    larger than the default sequence's on seeds 0-5, 7 and 8, **not on seed 6 (m_ch 1.37x: the
+    default sequence's m_ch std is its smallest there, 0.71x its mean)**. The predicted stds
+    (``evaluate_sequence``) are within 0.85-1.4x the jackknife ones on both sequences."""
     plan_ = pl.plan(PROTOTYPE, "5.2x1.6")
     runs = [(identify(_log(simulate(plan_.trajectory, seed=s))), identify(_log(simulate("identification", seed=s))))
             for s in SEEDS]
@@ -202,24 +222,25 @@ def test_planned_sequence_is_better_conditioned(acceptance):
 
 
 def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
-    """On seeds 1-3 every jackknife std of the plan is below the default sequence's (seeds 5 and 6 are
-    not: d_cw up to 1.09x, m_ch 1.06x; see the fixture), and on average clearly below."""
+    """On seeds 0-3 every jackknife std of the plan is below the default sequence's (seed 6 is not: m_ch
+    1.37x; see the fixture), and on average clearly below (seeds 0-3: largest mean ratio d_cw 0.74)."""
     _, runs = acceptance
     for seed, (planned, default) in zip(SEEDS, runs):
         worse = {n: (planned.std[n], default.std[n]) for n in planned.std if planned.std[n] > default.std[n]}
         assert not worse, f"seed {seed}: std larger than with the default sequence: {worse}"
     ratio = {n: np.mean([p.std[n] / d.std[n] for p, d in runs]) for n in pl.FREE}
-    assert max(ratio.values()) < 0.95, ratio
+    assert max(ratio.values()) < 0.9, ratio
 
 
 def test_predicted_stds_match_the_jackknife(acceptance):
     """The planner's predicted std (the sandwich with rows whose variance grows with the acceleration,
-    ``NoiseLevels``) against the identified jackknife std, mean over the seeds, on both sequences."""
+    ``NoiseLevels``) against the identified jackknife std, mean over the seeds, on both sequences (seeds
+    0-3: 0.85-1.38; the plan's C_r and d_vr are predicted 1.3-1.4x too large)."""
     plan_, runs = acceptance
     for k, evaluation in ((0, plan_.evaluation), (1, plan_.reference)):
         for n in pl.FREE:
             measured = np.mean([r[k].std[n] for r in runs])
-            assert 0.7 < evaluation.std[n] / measured < 1.4, (k, n, evaluation.std[n], measured)
+            assert 0.7 < evaluation.std[n] / measured < 1.5, (k, n, evaluation.std[n], measured)
 
 
 def test_planned_sequence_parameters_within_5_percent_or_3_std(acceptance):

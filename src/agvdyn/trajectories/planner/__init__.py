@@ -28,7 +28,8 @@ Objectives (``PlanSettings.objective``), each plus those validity penalties:
 
 * ``std`` (default): the mean of ``log(std_i / |p_i|)`` over the ten parameters (the predicted
   relative standard deviations, from the sandwich), with a penalty on every parameter whose predicted
-  std exceeds ``reference_margin`` times the one of the default sequence in the same floor and
+  std exceeds its margin (``reference_margin``, per parameter ``parameter_margins``) times the one of
+  the default sequence in the same floor and
   duration, and on ``cond(Theta_1w^T Theta_1w)`` above ``cond_target``. It trades conditioning
   against precision and the model's validity.
 * ``d-optimal``: ``log det`` of the parameters' covariance (the sandwich's block of the ten).

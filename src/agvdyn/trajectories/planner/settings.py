@@ -114,6 +114,9 @@ class PlanSettings:
     objective : ``std`` (default), ``d-optimal`` or ``cond`` (see the module docstring).
     starts : random starts of the optimiser; ``seed`` their generator; ``workers`` processes
         (None: up to two, one per core).
+    periods : repetitions of each phase's period (steer left, steer right, straight, rotation; the
+        harmonics are then p, 2p, ...); default one each (docs/planning.md: a repeated straight
+        took its time from the other phases and was worse on the simulator).
     harmonics : (fewest, most) harmonics of a phase; each start draws them per phase, capped so
         that the highest harmonic stays below ``max_frequency`` (rad/s, well inside the
         identification filter's 40 rad/s).
@@ -128,6 +131,9 @@ class PlanSettings:
     reference_margin : the ``std`` objective penalises a predicted std above ``reference_margin``
         times the default sequence's: room for the prediction's errors (15-20 %) and the scatter
         of a single run's jackknife std (8-16 %), so that single runs beat the default too.
+        ``parameter_margins`` overrides it by name: the stds that rest on few jackknife blocks
+        (m_ch, C_ch, d_vw) or whose default-sequence prediction is high (d_cw) scatter most
+        against the default's and get 0.45-0.5.
     steering_threshold, stiction_threshold, stiction_guard : the identification's stiction
         thresholds (rad/s steering; m/s, rad/s chassis) and guard (s) used to predict which rows
         it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05, 2 / 40 rad/s).
