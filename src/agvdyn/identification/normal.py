@@ -277,6 +277,13 @@ class RegressionData:
         if cached is not None and cached[0].shape == coef.shape and np.array_equal(cached[0], coef):
             return cached[1], cached[2]
         groups, keys = np.zeros(len(self.group_names)), np.zeros(len(self.keys))
+        from_factors = self._factor_sums(coef)
+        if from_factors is not None:  # no pass over the rows
+            keys = from_factors
+            for key, value in zip(self.keys, keys):
+                groups[self.group_names.index(key[1])] += value
+            object.__setattr__(self, "_sums", (coef.copy(), groups, keys))
+            return groups, keys
         for rec in self.recordings():
             r = rec.y - rec.A @ coef
             r2 = r * r
@@ -285,6 +292,21 @@ class RegressionData:
                 keys += np.bincount(rec.key, weights=r2, minlength=keys.size)
         object.__setattr__(self, "_sums", (coef.copy(), groups, keys))
         return groups, keys
+
+    def _factor_sums(self, coef: np.ndarray, min_share: float = 1e-6) -> np.ndarray | None:
+        """Residual sum of squares per key from its pseudo-rows, ``|P [coef; -1]|^2``, where that is
+        exact to ~1e-13: the cancellation in ``P`` costs ~eps |y| |r|, so every key's residual must
+        keep at least ``min_share`` of its ``|y|^2``; None otherwise (a near-exact fit: the rows)."""
+        if not self.key_pseudo or len(self.key_pseudo) != len(self.keys):
+            return None
+        x = np.append(coef, -1.0)
+        sums = np.empty(len(self.keys))
+        for i, P in enumerate(self.key_pseudo):
+            r = P @ x
+            sums[i] = r @ r
+            if not sums[i] >= min_share * (P[:, -1] @ P[:, -1]):
+                return None
+        return sums
 
     def stacked(self) -> "RegressionData":
         """The same system with every stored row in memory (for estimators that weigh single rows)."""

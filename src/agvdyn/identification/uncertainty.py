@@ -214,18 +214,29 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block ids present (sorted) and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b``
-    (nb, p): one BLAS product per run of rows of one block (the rows come per coordinate in time
-    order, so a block is a few runs; no sort and no reordered copy of the rows)."""
+    (nb, p): one BLAS product per run of rows of one block and one weight (the rows come per
+    coordinate in time order and weigh alike per coordinate, so a block is a few runs; no sort and
+    no reordered copy of the rows). Weights that change from row to row are applied to the rows."""
     p = A.shape[1]
-    bounds = np.concatenate([[0], np.flatnonzero(np.diff(block)) + 1, [block.size]])
+    change = np.diff(block) != 0
+    change |= np.diff(w) != 0
+    bounds = np.concatenate([[0], np.flatnonzero(change) + 1, [block.size]])
+    per_row = bounds.size > block.size // 16  # e.g. robust weights: weigh the rows instead
     ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
     Ay = np.empty((A.shape[0], p + 1))
     Ay[:, :p], Ay[:, p] = A, y
-    Aw = A * w[:, None]
+    if per_row:
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(block)) + 1, [block.size]])
+        ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
+        Aw, scale = A * w[:, None], np.ones(bounds.size - 1)
+    else:
+        Aw, scale = A, w[bounds[:-1]]
     moments = np.zeros((ids.size, p, p + 1))
     part = np.empty((p, p + 1))
-    for j, a, e in zip(which.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
+    for j, a, e, c in zip(which.tolist(), bounds[:-1].tolist(), bounds[1:].tolist(), scale.tolist()):
         np.matmul(Aw[a:e].T, Ay[a:e], out=part)
+        if c != 1.0:
+            part *= c
         moments[j] += part
     return ids, moments[:, :, :-1], moments[:, :, -1]
 
