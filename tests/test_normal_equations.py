@@ -63,6 +63,24 @@ def test_identify_streams_logs_and_keeps_no_blocks_when_asked(noisy_log):
     assert lean.n_samples == 2 * len(noisy_log.t) and lean.rows.samples == lean.n_samples
 
 
+def test_threads_give_the_same_answer_and_the_default_follows_the_environment(noisy_log, monkeypatch):
+    """Logs reduced and jackknife blocks summed in threads are merged in order: the same numbers, to
+    the last bit; the default thread count is the cores (at most 4) unless AGVDYN_THREADS says."""
+    from agvdyn.identification._threads import default_workers
+
+    logs = [noisy_log] * 3
+    one, three = identify(logs, keep_blocks=False, workers=1), identify(logs, keep_blocks=False, workers=3)
+    assert np.array_equal(_vector(one), _vector(three))
+    assert one.std == three.std and one.uncertainty == three.uncertainty
+    monkeypatch.setenv("AGVDYN_THREADS", "3")
+    assert default_workers() == 3
+    monkeypatch.setenv("AGVDYN_THREADS", "0")
+    with pytest.raises(ValueError, match="AGVDYN_THREADS='0'"):
+        default_workers()
+    monkeypatch.delenv("AGVDYN_THREADS")
+    assert 1 <= default_workers() <= 4
+
+
 def test_row_store_spills_to_disk_and_reads_back_the_same_rows():
     rng = np.random.default_rng(0)
     store = RowStore(budget=0)  # everything to disk

@@ -188,6 +188,9 @@ def identify(
     experiment: Annotated[str, typer.Option(
         "--experiment", help="auto (from the segment labels), vehicle, or lifted-wheel: the single-axis test "
                              "of sec. 7 (wheels off the ground) gives B_w and the wheel friction without load.")] = "auto",
+    threads: Annotated[Optional[int], typer.Option(
+        "--threads", min=1, help="Threads reading and reducing the logs (default: the cores, at most 4; "
+                                 "or AGVDYN_THREADS). The result does not depend on it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
@@ -199,7 +202,8 @@ def identify(
                          max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth,
                          unexcited, torque_lead)
     # logs are read one at a time inside identify(): memory does not grow with their number
-    ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False)
+    ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False,
+                        workers=threads)
     try:
         written = ident.write(out)
     except OSError as exc:

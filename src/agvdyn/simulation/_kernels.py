@@ -215,30 +215,66 @@ def _friction_terms(c, v, d_v, d_c, inertia, dt):
 
 
 @_jit_borrow
-def _cholesky_solve(K, rhs, n):
-    """Solve K x = rhs in place (K symmetric positive definite, lower triangle read and
-    overwritten by its Cholesky factor L); returns x in rhs. The forward substitution runs
-    column by column with the factorization (the same operations; a shorter chain of latencies)."""
-    for j in range(n):
-        d = K[j, j]
-        for k in range(j):
-            d -= K[j, k] * K[j, k]
-        d = math.sqrt(d)
-        K[j, j] = d
-        for i in range(j + 1, n):
-            t = K[i, j]
-            for k in range(j):
-                t -= K[i, k] * K[j, k]
-            K[i, j] = t / d
-        t = rhs[j]
-        for k in range(j):
-            t -= K[j, k] * rhs[k]
-        rhs[j] = t / d
-    for i in range(n - 1, -1, -1):
-        t = rhs[i]
-        for k in range(i + 1, n):
-            t -= K[k, i] * rhs[k]
-        rhs[i] = t / K[i, i]
+def _arrow_solve(K, rhs):
+    """Solve K x = rhs in place for the plant's K (lower triangle read and overwritten); x in rhs.
+
+    K is an arrow: each wheel (5-8) couples only to the chassis (0-2) and its steering side (3, 4),
+    each steering side only to the chassis. Eliminating the wheels, then the steering sides, then
+    the chassis block (LDL^T) makes no fill-in: about a third of the operations of a dense 9 x 9
+    Cholesky and a much shorter chain of dependent ones (K is symmetric positive definite: no pivoting).
+    """
+    for i in range(4):
+        p, a = 5 + i, 3 if i < 2 else 4
+        k0, k1, k2, ka = K[p, 0], K[p, 1], K[p, 2], K[p, a]
+        inv = 1.0 / K[p, p]
+        f0, f1, f2, fa = k0 * inv, k1 * inv, k2 * inv, ka * inv
+        K[0, 0] -= f0 * k0
+        K[1, 0] -= f1 * k0
+        K[1, 1] -= f1 * k1
+        K[2, 0] -= f2 * k0
+        K[2, 1] -= f2 * k1
+        K[2, 2] -= f2 * k2
+        K[a, 0] -= fa * k0
+        K[a, 1] -= fa * k1
+        K[a, 2] -= fa * k2
+        K[a, a] -= fa * ka
+        y = rhs[p]
+        rhs[0] -= f0 * y
+        rhs[1] -= f1 * y
+        rhs[2] -= f2 * y
+        rhs[a] -= fa * y
+    for a in range(3, 5):
+        k0, k1, k2 = K[a, 0], K[a, 1], K[a, 2]
+        inv = 1.0 / K[a, a]
+        f0, f1, f2 = k0 * inv, k1 * inv, k2 * inv
+        K[0, 0] -= f0 * k0
+        K[1, 0] -= f1 * k0
+        K[1, 1] -= f1 * k1
+        K[2, 0] -= f2 * k0
+        K[2, 1] -= f2 * k1
+        K[2, 2] -= f2 * k2
+        y = rhs[a]
+        rhs[0] -= f0 * y
+        rhs[1] -= f1 * y
+        rhs[2] -= f2 * y
+    # chassis block: LDL^T, forward and back substitution
+    d0 = K[0, 0]
+    l10, l20 = K[1, 0] / d0, K[2, 0] / d0
+    d1 = K[1, 1] - l10 * K[1, 0]
+    k21 = K[2, 1] - l20 * K[1, 0]
+    l21 = k21 / d1
+    d2 = K[2, 2] - l20 * K[2, 0] - l21 * k21
+    y1 = rhs[1] - l10 * rhs[0]
+    y2 = rhs[2] - l20 * rhs[0] - l21 * y1
+    x2 = y2 / d2
+    x1 = y1 / d1 - l21 * x2
+    x0 = rhs[0] / d0 - l10 * x1 - l20 * x2
+    rhs[0], rhs[1], rhs[2] = x0, x1, x2
+    for a in range(3, 5):
+        rhs[a] = (rhs[a] - K[a, 0] * x0 - K[a, 1] * x1 - K[a, 2] * x2) / K[a, a]
+    for i in range(4):
+        p, a = 5 + i, 3 if i < 2 else 4
+        rhs[p] = (rhs[p] - K[p, 0] * x0 - K[p, 1] * x1 - K[p, 2] * x2 - K[p, a] * rhs[a]) / K[p, p]
 
 
 @_jit
@@ -307,7 +343,7 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         if pen != 0.0:
             K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
             rhs[3 + j] -= dt * c[_KSTOP] * pen
-    _cholesky_solve(K, rhs, 9)
+    _arrow_solve(K, rhs)
     # energy accounts at the new velocities
     p_motor = 0.0
     for i in range(4):
