@@ -368,3 +368,29 @@ def test_sparse_plant_terms_equal_the_dense_products():
         _iteration_matrix(M, A, d, 5e-4, K)
         dense = M + 5e-4 * A.T @ np.diag(d) @ A
         np.testing.assert_allclose(np.tril(K), np.tril(dense), rtol=1e-12, atol=1e-9)
+
+
+def test_arrow_solve_equals_the_dense_solve():
+    """The plant step's solve of K x = rhs (wheels, then steering sides, then the chassis block
+    eliminated) against numpy's dense solve of the symmetric K at random states, with joint
+    friction and a stop on the diagonal."""
+    from agvdyn.simulation._kernels import (_arrow_solve, _constraint_rows, _inertia_terms, _iteration_matrix,
+                                            _unit_trig)
+
+    c = plant_constants(G, P, PlantSettings())
+    rng = np.random.default_rng(11)
+    tr, A, M, h, K = np.zeros((4, 2)), np.zeros((8, 9)), np.zeros((9, 9)), np.zeros(9), np.zeros((9, 9))
+    for _ in range(50):
+        alpha, v, d = rng.uniform(-1.57, 1.57, 2), rng.normal(size=9), 10 ** rng.uniform(1, 6, 8)
+        _unit_trig(alpha[0], alpha[1], tr)
+        _constraint_rows(c, tr, A)
+        _inertia_terms(c, tr, v, M, h)
+        _iteration_matrix(M, A, d, 5e-4, K)
+        for q in range(3, 9):
+            K[q, q] += 5e-4 * rng.uniform(0, 50)
+        dense = np.tril(K) + np.tril(K, -1).T
+        rhs = rng.normal(size=9)
+        want = np.linalg.solve(dense, rhs)
+        x = rhs.copy()
+        _arrow_solve(K, x)
+        np.testing.assert_allclose(x, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())

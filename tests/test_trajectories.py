@@ -51,6 +51,42 @@ def test_fourier_derivatives_match_finite_differences():
     np.testing.assert_allclose(np.gradient(qd, t)[1:-1], qdd[1:-1], atol=1e-5)
 
 
+def test_fourier_recurrence_matches_the_sum_of_harmonics():
+    """evaluate() takes the harmonics' powers of exp(i w t) by recurrence: equal to the direct sum of
+    sin(k w t), cos(k w t) to round-off over three periods and up to 12 harmonics."""
+    rng = np.random.default_rng(7)
+    for n in (1, 5, 12):
+        series = FourierSeries(0.7, tuple(rng.normal(size=n)), tuple(rng.normal(size=n)), 0.4)
+        t = np.arange(int(3 * series.period / 0.002)) * 0.002
+        k = np.arange(1, n + 1) * series.base_frequency
+        a, b = np.array(series.a), np.array(series.b)
+        s, c = np.sin(np.multiply.outer(t, k)), np.cos(np.multiply.outer(t, k))
+        direct = (series.start + np.sum(b / k) + s @ (a / k) - c @ (b / k), c @ a + s @ b, -s @ (a * k) + c @ (b * k))
+        for got, want in zip(series.evaluate(t), direct):
+            assert np.abs(got - want).max() <= 1e-13 * np.abs(want).max()
+
+
+def test_feedforward_with_the_joint_motion_given_and_against_the_per_sample_solve():
+    """Trajectory.feedforward(params, motion) equals feedforward(params); in the modes with a constant
+    admissible basis the torques equal the per-sample minimum-norm solution of N^T B u = N^T Theta p."""
+    from agvdyn.dynamics import generalized_forces
+    from agvdyn.kinematics import admissible_basis
+
+    for traj in (identification_sequence(), lane_change(), lateral_experiment()):
+        motion = traj.joint_motion()
+        u = traj.feedforward(PAPER_PARAMETERS, motion)
+        np.testing.assert_array_equal(u, traj.feedforward(PAPER_PARAMETERS))
+        for seg, (_, sl) in zip(traj.segments, traj.segment_slices()):
+            if seg.mode in (Mode.CAR_LIKE, Mode.LATERAL):
+                continue
+            f = generalized_forces(motion[0][sl], motion[1][sl], PAPER_PARAMETERS)
+            N = admissible_basis(PROTOTYPE, seg.mode, seg.alpha)
+            M = PROTOTYPE.i_G * np.swapaxes(N[:, 5:, :], 1, 2)
+            g = np.einsum("nim,ni->nm", N, f)
+            y = np.linalg.solve(np.einsum("nik,njk->nij", M, M), g[..., None])[..., 0]
+            np.testing.assert_allclose(u[sl], np.einsum("nik,ni->nk", M, y), rtol=1e-12, atol=1e-14)
+
+
 def test_fourier_scaling_to_peaks():
     series = FourierSeries.at_rest(1.0, (1.0, 0.5), (0.3, -0.2), peak_velocity=0.7, peak_excursion=10.0)
     q, qd, _ = series.evaluate(np.linspace(0, series.period, 5001))

@@ -216,12 +216,23 @@ def projected_input(geom: Geometry, mode, alpha, u, *, tolerance: float = MODE_T
 
 
 def generalized_forces(q_dot, q_ddot, params: Parameters, epsilon: float = EPSILON) -> np.ndarray:
-    """Model forces Theta(q, q_dot, q_ddot) p ``(N, 9)`` of eq. (15)-(16)."""
-    return regressor(q_dot, q_ddot, epsilon) @ params.to_vector()
+    """Model forces Theta(q, q_dot, q_ddot) p ``(N, 9)`` of eq. (15)-(16), from the nonzero entries
+    of Theta (:func:`regressor`) without forming it."""
+    qd, qdd = _motion(q_dot, q_ddot)
+    p = params.to_vector()
+    f = np.empty((qd.shape[0], N_Q))
+    f[:, 0] = (qdd[:, 0] - qd[:, 1] * qd[:, 2]) * p[_I["m_ch"]]
+    f[:, 1] = (qdd[:, 1] + qd[:, 0] * qd[:, 2]) * p[_I["m_ch"]]
+    f[:, 2] = qdd[:, 2] * (p[_I["C_l"]] + p[_I["C_r"]] + p[_I["C_ch"]])
+    for row, (C, dv, dc) in ((3, ("C_l", "d_vl", "d_cl")), (4, ("C_r", "d_vr", "d_cr"))):
+        f[:, row] = qdd[:, row] * p[_I[C]] + qd[:, row] * p[_I[dv]] + np.tanh(qd[:, row] / epsilon) * p[_I[dc]]
+    f[:, 5:] = qdd[:, 5:] * p[_I["B_w"]] + qd[:, 5:] * p[_I["d_vw"]] + np.tanh(qd[:, 5:] / epsilon) * p[_I["d_cw"]]
+    return f
 
 
 def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, s_ddot, *,
-                        epsilon: float = EPSILON, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
+                        epsilon: float = EPSILON, tolerance: float = MODE_TOLERANCE,
+                        motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Motor torques u ``(N, 4)`` of the feed-forward law, eq. (21), for a desired motion in mode k.
 
     ``q_dot, q_ddot`` follow from eq. (4) and (20). The paper distributes ``H_k^T Theta p`` with a
@@ -237,11 +248,19 @@ def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, 
     and of steering at rest are linearly dependent (``h_y = (h_l + h_r)/a`` on the wheels): the
     steering force that the lateral force implies is put on the side whose stop absorbs it (each
     steering is pressed into its stop, never pulled off).
+
+    ``motion``: ``(q_dot, q_ddot)`` of the same motion when already computed (eq. 4 and 20).
     """
     mode = Mode.from_label(mode)
     alpha = as_alpha(alpha)
-    q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot, tolerance=tolerance)
+    if motion is None:
+        q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot, tolerance=tolerance)
+    else:
+        check_mode(geom, mode, alpha, tolerance)
+        q_dot, q_ddot = motion
     f = generalized_forces(q_dot, q_ddot, params, epsilon)
+    if mode is not Mode.CAR_LIKE:
+        return _constant_basis_torques(geom, mode, admissible_basis(geom, mode, alpha[:1], tolerance=tolerance)[0], f)
     N = admissible_basis(geom, mode, alpha, tolerance=tolerance)
     M = geom.i_G * np.swapaxes(N[:, 5:, :], 1, 2)  # N^T B  (n, m, 4)
     g = np.einsum("nim,ni->nm", N, f)
@@ -251,6 +270,16 @@ def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, 
     # full row rank: minimum-norm solution u = M^T (M M^T)^-1 g
     y = np.linalg.solve(np.einsum("nik,njk->nij", M, M), g[..., None])[..., 0]
     return np.einsum("nik,ni->nk", M, y)
+
+
+def _constant_basis_torques(geom: Geometry, mode: Mode, N: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Motor torques ``(n, 4)`` of :func:`feedforward_torques` where the admissible basis N ``(9, m)``
+    does not depend on alpha (modes 1, 3, 4, straight): N^T B and its right inverse are formed once."""
+    M = geom.i_G * N[5:, :].T  # N^T B  (m, 4)
+    g = f @ N
+    if mode is Mode.LATERAL:
+        return _lateral_steering_targets(geom, g) @ np.linalg.pinv(M, rcond=1e-10).T
+    return np.linalg.solve(M @ M.T, g.T).T @ M
 
 
 def _lateral_steering_targets(geom: Geometry, g: np.ndarray) -> np.ndarray:

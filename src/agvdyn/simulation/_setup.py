@@ -45,7 +45,7 @@ def prepare_run(traj: Trajectory, platform: Geometry, plant_params: Parameters, 
     """Plan, check the limits (``settings.check_limits``), draw the noise and set up the state."""
     motion = traj.joint_motion()
     q_dot_d = motion[0]
-    u_ff = np.ascontiguousarray(traj.feedforward(ctrl_params))
+    u_ff = np.ascontiguousarray(traj.feedforward(ctrl_params, motion))
     if settings.check_limits:
         limits = settings.limits
         if settings.plant.torque_limit is not None and settings.plant.torque_limit != limits.motor_torque:

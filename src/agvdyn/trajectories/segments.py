@@ -21,6 +21,7 @@ from agvdyn.kinematics import (
     Mode,
     check_mode,
     joint_motion,
+    kinematic_model,
     max_virtual_angle,
     nominal_steering,
     steering_from_virtual,
@@ -96,18 +97,23 @@ class Segment:
 
     def joint_motion(self, geom: Geometry) -> tuple[np.ndarray, np.ndarray]:
         """Planned ``(q_dot, q_ddot)`` ``(N, 9)``: eq. (4) and (20), or the free wheels when lifted."""
-        if not self.lifted:
+        if self.mode is Mode.CAR_LIKE:
             return joint_motion(geom, self.mode, self.alpha, self.s_dot, self.s_ddot)
+        if not self.lifted:  # H_k constant (dH_k/dt = 0): q_dot = H_k s_dot, q_ddot = H_k s_ddot
+            H = kinematic_model(geom, self.mode, self.alpha)[0]
+            return _times_columns(self.s_dot, H), _times_columns(self.s_ddot, H)
         qd, qdd = np.zeros((self.n_samples, 9)), np.zeros((self.n_samples, 9))
         qd[:, 5:], qdd[:, 5:] = self.wheel_rates[:, 0], self.wheel_rates[:, 1]
         return qd, qdd
 
-    def feedforward(self, geom: Geometry, params: Parameters) -> np.ndarray:
+    def feedforward(self, geom: Geometry, params: Parameters,
+                    motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Motor torques ``(N, 4)``: eq. (21), or, lifted, the wheel rows of eq. (16)-(17) alone
-        (``i_G M = B_w beta_ddot + d_vw beta_dot + d_cw tanh(beta_dot / epsilon)``)."""
+        (``i_G M = B_w beta_ddot + d_vw beta_dot + d_cw tanh(beta_dot / epsilon)``).
+        ``motion``: :meth:`joint_motion` when already computed."""
         if not self.lifted:
-            return feedforward_torques(geom, params, self.mode, self.alpha, self.s_dot, self.s_ddot)
-        qd, qdd = self.joint_motion(geom)
+            return feedforward_torques(geom, params, self.mode, self.alpha, self.s_dot, self.s_ddot, motion=motion)
+        qd, qdd = self.joint_motion(geom) if motion is None else motion
         return generalized_forces(qd, qdd, params)[:, 5:] / geom.i_G
 
     @property
@@ -215,9 +221,13 @@ class Trajectory:
         parts = [s.joint_motion(self.geometry) for s in self.segments]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
-    def feedforward(self, params: Parameters) -> np.ndarray:
-        """Feed-forward motor torques ``(N, 4)`` of eq. (21) with the parameters ``params``."""
-        return np.concatenate([s.feedforward(self.geometry, params) for s in self.segments])
+    def feedforward(self, params: Parameters, motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """Feed-forward motor torques ``(N, 4)`` of eq. (21) with the parameters ``params``;
+        ``motion``: :meth:`joint_motion` when already computed."""
+        if motion is None:
+            return np.concatenate([s.feedforward(self.geometry, params) for s in self.segments])
+        return np.concatenate([s.feedforward(self.geometry, params, (motion[0][a:b], motion[1][a:b]))
+                               for s, a, b in zip(self.segments, self.bounds[:-1], self.bounds[1:])])
 
     def wheel_angles(self, q_dot: np.ndarray | None = None) -> np.ndarray:
         """Planned wheel angles beta ``(N, 4)`` from 0: trapezoidal integral of the planned beta_dot."""
@@ -239,6 +249,14 @@ class Trajectory:
 
     def segment_slices(self) -> list[tuple[str, slice]]:
         return [(s.name, slice(int(a), int(b))) for s, a, b in zip(self.segments, self.bounds[:-1], self.bounds[1:])]
+
+
+def _times_columns(x: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """``x H^T`` ``(N, 9)`` for x ``(N, k)`` and H ``(9, k)``, summed column by column (k is 1 or 2)."""
+    out = x[:, :1] * H[:, 0]
+    for j in range(1, H.shape[1]):
+        out += x[:, j : j + 1] * H[:, j]
+    return out
 
 
 def _integrate(x: np.ndarray, dt: float) -> np.ndarray:
