@@ -394,3 +394,12 @@ def test_arrow_solve_equals_the_dense_solve():
         x = rhs.copy()
         _arrow_solve(K, x)
         np.testing.assert_allclose(x, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+
+
+def test_tanh_ratio_equals_tanh_over_x():
+    """The tyres' saturation tanh(x)/x from x^2 (Taylor series below x = 0.2) to round-off."""
+    from agvdyn.simulation._kernels import _tanh_ratio
+
+    for x in np.concatenate([[0.0, 1e-12, 1e-5], np.linspace(1e-4, 0.2, 2001), [0.2 + 1e-12, 0.3, 1.0, 5.0, 50.0]]):
+        want = 1.0 if x == 0 else math.tanh(x) / x
+        assert abs(_tanh_ratio(x * x) - want) <= 4e-16 * want
