@@ -12,7 +12,10 @@ numba cache load, plan, simulation and writing the log included) and its real-ti
 Target: >= 500x of work for both settings (issue 12; the goal is 1000x). For reference, on the
 shared 2-core machine: before the sparse plant step (commit 1ef4a37) ~285x of work (closed loop
 ~340 ms, plan ~70 ms) and ~2.1 s end to end; after it ~550x (closed loop ~140 ms) and ~1.8 s,
-where imports (~1.5 s: scipy, pandas, numba) and numba's cache load dominate.
+where imports (~1.5 s: scipy, pandas, numba) and numba's cache load dominate. With the arrow
+solve, the tyre series and the cheaper plan (commits 7877aa2, 64a2588, 336be4b): default 739-785x
+(plan 31-37 ms, closed loop 119-124 ms), --slip 662-728x, 1.8-2.05 s end to end, against
+398-554x, 500-535x and 2.4 s for the code before them in alternating runs on a loaded machine.
 """
 from __future__ import annotations
 
