@@ -120,27 +120,29 @@ def _step_scores(est: Estimator, data: RegressionData, max_steps: int | None = N
         yield dense
 
 
-def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 15) -> np.ndarray:
+def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 15,
+                     workers: int = 1) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
     ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
 
     Each recording contributes at most its first ``max_steps`` steps (65 s at 500 Hz), and
     recordings are pooled until ``4 * max_steps`` steps: the correlation times are tens to hundreds
     of steps, so this is plenty, and the cost does not grow with the length or number of the logs.
+    ``workers``: threads taking the recordings' autocorrelations while the next ones are read.
     """
+    def taken() -> Iterator[np.ndarray]:
+        pooled = 0
+        for x in series:
+            if pooled >= 4 * max_steps:
+                return
+            pooled += min(x.shape[0], max_steps)
+            yield x[:max_steps]
+
+    fft_threads = -1 if workers <= 1 else 1
     acf = None
-    pooled = 0
-    for x in series:
-        if pooled >= 4 * max_steps:
-            break
-        p = x.shape[1]
-        x = np.ascontiguousarray(x[:max_steps].T, dtype=np.float32)  # single precision: ~7 digits of rho
-        n = x.shape[1]
-        pooled += n
-        size = scipy.fft.next_fast_len(2 * n, real=True)
-        f = scipy.fft.rfft(x, size, axis=1, workers=-1)
-        c = scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=-1)[:, :n].T.astype(float)
+    for c in ordered_map(lambda x: _autocovariance(x, fft_threads), taken(), workers, "agvdyn-acf"):
         acf = c if acf is None else _pad_add(acf, c)
+    p = acf.shape[1]
     rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
     tau = np.ones(p)
     for j in range(p):
@@ -149,6 +151,16 @@ def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_s
         ok = np.flatnonzero(m >= window * cum)
         tau[j] = max(1.0, float(cum[ok[0]] if ok.size else cum[-1]))
     return tau
+
+
+def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
+    """Unnormalised autocovariance sums (n, p) of the columns of x (n, p), by FFT in single
+    precision (~7 digits of rho are plenty for a window sum)."""
+    x = np.ascontiguousarray(x.T, dtype=np.float32)
+    n = x.shape[1]
+    size = scipy.fft.next_fast_len(2 * n, real=True)
+    f = scipy.fft.rfft(x, size, axis=1, workers=fft_threads)
+    return scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=fft_threads)[:, :n].T.astype(float)
 
 
 def _pad_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -285,7 +297,7 @@ def _largest_leverage(M: np.ndarray, trace: np.ndarray, top: float, batch: int =
 def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
                ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Delete-one-block jackknife (CR3) covariance over blocks of L steps, the degrees of freedom of
-    each variance and the leverage figures."""
+    each variance and the leverage figures (chunks of blocks in ``workers`` threads, summed in order)."""
     B = est.bread_
     lam, V = np.linalg.eigh((B + B.T) / 2)
     half = (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T  # B^(1/2)
@@ -294,32 +306,47 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
     c_sq = np.zeros(p)  # sum_b d_b^4 per parameter (sum_b d_b^2 is the diagonal of cov)
     top, above, blocks = 0.0, 0, 0
     capped: set[int] = set()
-    for G, S in _block_moments(est, data, L, residuals=True, per_log=True, workers=workers):  # S: block score sums A_b^T W r_b
-        M = half @ G @ half  # B^1/2 G_b B^1/2, eigenvalues = block leverages
-        M = (M + np.swapaxes(M, 1, 2)) / 2
-        x = np.einsum("ij,bj->bi", half, S)
-        trace = np.einsum("bii->b", M)  # >= the largest leverage (M is positive semi-definite)
-        low = trace <= max(LEVERAGE_WARNING, top)
-        if low.any():  # no leverage near 1: (I - M_b) x = B^1/2 S_b solved directly
-            x[low] = np.linalg.solve(np.eye(p) - M[low], x[low][..., None])[..., 0]
-            top = _largest_leverage(M[low], trace[low], top)
-        high = np.flatnonzero(~low)
-        if high.size:  # the leverages: capped at MAX_LEVERAGE, counted, the largest reported
-            h, Q = np.linalg.eigh(M[high])
-            top = max(top, float(h[:, -1].max()))
-            above += int(np.count_nonzero(h[:, -1] > LEVERAGE_WARNING))
-            for j in np.flatnonzero(h[:, -1] > MAX_LEVERAGE):  # directions one block alone determines
-                v = np.abs(half @ Q[j, :, -1])
-                capped.update(np.flatnonzero(v > 0.3 * v.max()).tolist())
-            z = np.einsum("bji,bj->bi", Q, x[high]) / (1.0 - np.minimum(h, MAX_LEVERAGE))
-            x[high] = np.einsum("bij,bj->bi", Q, z)
-        d = x @ half  # B (I - G_b B)^-1 S_b (half is symmetric)
-        cov += d.T @ d
-        c_sq += (d**4).sum(axis=0)
-        blocks += S.shape[0]
+    moments = _block_moments(est, data, L, residuals=True, per_log=True, workers=workers)
+    for dd, d4, n, chunk_top, chunk_above, chunk_capped in ordered_map(
+            lambda GS: _block_changes(half, *GS), moments, workers, "agvdyn-jackknife"):
+        cov += dd
+        c_sq += d4
+        blocks += n
+        top, above = max(top, chunk_top), above + chunk_above
+        capped |= chunk_capped
     dof = np.where(c_sq > 0, 3.0 * np.diag(cov) ** 2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
     return cov, dof, {"blocks": blocks, "block_steps": L, "max_block_leverage": top,
                       "blocks_above_half_leverage": above, "single_block_columns": sorted(capped)}
+
+
+def _block_changes(half: np.ndarray, G: np.ndarray, S: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, int, float, int, set[int]]:
+    """For blocks with Grams G (nb, p, p) and score sums S (nb, p): ``sum_b d_b d_b^T`` and
+    ``sum_b d_b^4`` of the changes ``d_b = B (I - G_b B)^-1 S_b``, the number of blocks, their
+    largest leverage, how many exceed LEVERAGE_WARNING and the columns of directions one block
+    alone determines (leverage above MAX_LEVERAGE, capped there)."""
+    p = half.shape[0]
+    M = half @ G @ half  # B^1/2 G_b B^1/2, eigenvalues = block leverages
+    M = (M + np.swapaxes(M, 1, 2)) / 2
+    x = S @ half  # B^1/2 S_b (half is symmetric)
+    trace = np.einsum("bii->b", M)  # >= the largest leverage (M is positive semi-definite)
+    low = trace <= LEVERAGE_WARNING
+    top, above, capped = 0.0, 0, set()
+    if low.any():  # every leverage <= 0.5: (I - M_b) x = B^1/2 S_b solved directly
+        x[low] = np.linalg.solve(np.eye(p) - M[low], x[low][..., None])[..., 0]
+        top = _largest_leverage(M[low], trace[low], top)
+    high = np.flatnonzero(~low)
+    if high.size:  # the leverages: capped at MAX_LEVERAGE, counted, the largest reported
+        h, Q = np.linalg.eigh(M[high])
+        top = max(top, float(h[:, -1].max()))
+        above = int(np.count_nonzero(h[:, -1] > LEVERAGE_WARNING))
+        for j in np.flatnonzero(h[:, -1] > MAX_LEVERAGE):  # directions one block alone determines
+            v = np.abs(half @ Q[j, :, -1])
+            capped.update(np.flatnonzero(v > 0.3 * v.max()).tolist())
+        z = np.einsum("bji,bj->bi", Q, x[high]) / (1.0 - np.minimum(h, MAX_LEVERAGE))
+        x[high] = np.einsum("bij,bj->bi", Q, z)
+    d = x @ half  # B (I - G_b B)^-1 S_b
+    return d.T @ d, (d**4).sum(axis=0), S.shape[0], top, above, capped
 
 
 def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data: RegressionData, *,
@@ -338,7 +365,7 @@ def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data:
     if method is UncertaintyMethod.CLASSIC:
         return Uncertainty(method, est.cov_, {"sigma2": float(est.sigma2_)})
     lengths = data.store.lengths()  # without reading the rows back
-    tau = correlation_time(_step_scores(est, data, max_steps=1 << 15))
+    tau = correlation_time(_step_scores(est, data, max_steps=1 << 15), workers=workers)
     L = int(bandwidth) if bandwidth is not None else int(min(max(min_bandwidth, math.ceil(bandwidth_factor * tau.max())),
                                                               max(1, max(lengths) // 4)))
     details: dict[str, Any] = {"bandwidth_steps": L, "correlation_time_steps": float(tau.max()),
