@@ -29,19 +29,6 @@ __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows",
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
-#: |x| beyond which the C library's tanh returns +-1 exactly (glibc: 22).
-_TANH_SATURATION = 22.0
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _tanh(x):  # pragma: no cover - compiled
-    if x > _TANH_SATURATION:
-        return 1.0
-    if x < -_TANH_SATURATION:
-        return -1.0
-    return np.tanh(x)
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
     """Row i of column c of ``np.gradient(x, dt, axis=0, edge_order=2)`` (``half_rate = 0.5 / dt``:
@@ -101,8 +88,19 @@ def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no 
         slip[j, w] = np.sqrt(lat * lat + lon * lon)
 
 
+def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, scratch=None) -> None:
+    """See :func:`_stretch_motion`; the six friction entries ``tanh(q_dot / eps)`` are taken after
+    the sweep by numpy's vectorised tanh on one contiguous array (``scratch`` (n, 6), optional): a
+    scalar libm tanh per entry had been a third of the sweep."""
+    arg = np.empty((f.shape[0], 6)) if scratch is None else scratch
+    _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, arg)
+    np.tanh(arg, out=arg)
+    sig[:, 5:9:3] = arg[:, :2]
+    sig[:, 17:21] = arg[:, 2:]
+
+
 @numba.njit(cache=True, nogil=True)
-def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig):  # pragma: no cover
+def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, arg):  # pragma: no cover
     """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr). Writes
     ``alpha`` (n, 2) clipped to the stops, ``trig`` (n, 4) their (sin, cos) left and right,
     ``qd``, ``qdd`` (n, 9) joint velocities and accelerations (chassis by odometry, eq. 3),
@@ -138,11 +136,11 @@ def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, s
         for c in range(2):
             sig[j, 3 + 3 * c] = qdd[j, 3 + c]
             sig[j, 4 + 3 * c] = qd[j, 3 + c]
-            sig[j, 5 + 3 * c] = _tanh(qd[j, 3 + c] * per_eps)
+            arg[j, c] = qd[j, 3 + c] * per_eps  # tanh taken by stretch_motion
         for w in range(4):
             sig[j, 9 + w] = qdd[j, 5 + w]
             sig[j, 13 + w] = qd[j, 5 + w]
-            sig[j, 17 + w] = _tanh(qd[j, 5 + w] * per_eps)
+            arg[j, 2 + w] = qd[j, 5 + w] * per_eps
         for w in range(4):
             if lead == 0.0 or j == 0:
                 sig[j, 21 + w] = torque[j, w]
@@ -296,13 +294,13 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
 
 @numba.njit(cache=True, nogil=True)
 def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, column, out, key, step,
-              group, by_key, cursor):  # pragma: no cover - compiled
+              group, by_key, cursor, nonzero):  # pragma: no cover - compiled
     """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1): the
     columns of ``[regressor | offsets]`` at the positions ``column`` (natural column -> stored
     one), the torque last; ``key``, ``step``, ``group`` per row. Rows of slot c get key
     ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Each row is also
-    written to ``by_key[cursor[key]]`` (and the cursor advanced): the rows grouped by key.
-    Returns the rows written."""
+    written to ``by_key[cursor[key]]`` (and the cursor advanced): the rows grouped by key, and
+    ``nonzero[key, p]`` set where a row of the key has column p not zero. Returns the rows written."""
     n, dof = keep.shape
     w = out.shape[1]
     k = 0
@@ -322,7 +320,10 @@ def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_
             dest = cursor[slot_key[c]]
             cursor[slot_key[c]] = dest + 1
             for p in range(w):
-                by_key[dest, p] = out[k, p]
+                v = out[k, p]
+                by_key[dest, p] = v
+                if v != 0.0:
+                    nonzero[slot_key[c], p] = True
             k += 1
     return k
 

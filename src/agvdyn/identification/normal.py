@@ -92,10 +92,12 @@ class RowStatistics:
         return out
 
 
-def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None) -> np.ndarray:
+def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None,
+                    used: np.ndarray | None = None) -> np.ndarray:
     """Triangular factor (size, size) of ``rows`` (m, size) stacked on ``old`` (a factor): QR in
-    chunks of rows over the columns that are not zero anywhere (the others stay zero)."""
-    used = np.abs(rows).max(axis=0) > 0
+    chunks of rows over the columns that are not zero anywhere (the others stay zero; ``used``:
+    the rows' columns not zero, when known)."""
+    used = np.abs(rows).max(axis=0) > 0 if used is None else used.copy()
     if old is not None:
         used |= np.abs(old).max(axis=0) > 0
     cols = np.flatnonzero(used)
@@ -157,17 +159,19 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
     key, step, group = np.empty(total, np.int16), np.empty(total, np.int64), np.empty(total, np.int8)
     column = np.arange(width) if columns is None else np.argsort(columns)
     start, recordings = 0, []
+    nonzero = np.zeros((len(per_key), width + 1), dtype=bool)
     for b, key_of, group_of, m in plan:
         offs = b.offset_regressor if offsets else np.zeros((0, 1, 4))
         kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets, column,
                   rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m],
-                  by_key, cursor)
+                  by_key, cursor, nonzero)
         if recordings and recordings[-1][0] == b.recording:
             recordings[-1][2] = start + m
         else:
             recordings.append([b.recording, start, start + m])
         start += m
-    factors = tuple(triangular_rows(by_key[a:e], width + 1) for a, e in zip(starts.tolist(), ends.tolist()))
+    factors = tuple(triangular_rows(by_key[a:e], width + 1, used=nonzero[i])
+                    for i, (a, e) in enumerate(zip(starts.tolist(), ends.tolist())))
     counts = tuple(per_key)
     return LogReduction(tuple(keys), tuple(groups), factors, counts, rows, key, group, step,
                         tuple(tuple(r) for r in recordings))

@@ -186,7 +186,8 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     middle = both[pad:pad + n]
     torque = np.ascontiguousarray(log.torque[sl], dtype=float)
     stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,
-                   torque_lead(log, settings), alpha, trig, q_dot, q_ddot, slip, middle)
+                   torque_lead(log, settings), alpha, trig, q_dot, q_ddot, slip, middle,
+                   empty(workspace, f"tanh{tag}", (n, 6)))
     if settings.filtering is Filtering.PARALLEL:
         filtfilt_in_place(sos, zi, both, pad)
     else:
