@@ -229,6 +229,21 @@ def _friction_terms(c, v, d_v, d_c, inertia, dt):
     return d_v + slope, f - slope * v
 
 
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def _into_chassis(K, rhs, k0, k1, k2, f0, f1, f2, y):  # pragma: no cover - compiled
+    """Eliminate one joint coupled to the chassis by ``(k0, k1, k2)`` (``f = k / pivot``, ``y`` its
+    right-hand side) from the chassis block of K's lower triangle and from rhs."""
+    K[0, 0] -= f0 * k0
+    K[1, 0] -= f1 * k0
+    K[1, 1] -= f1 * k1
+    K[2, 0] -= f2 * k0
+    K[2, 1] -= f2 * k1
+    K[2, 2] -= f2 * k2
+    rhs[0] -= f0 * y
+    rhs[1] -= f1 * y
+    rhs[2] -= f2 * y
+
+
 @_jit_borrow
 def _arrow_solve(K, rhs):
     """Solve K x = rhs in place for the plant's K (lower triangle read and overwritten); x in rhs.
@@ -243,35 +258,17 @@ def _arrow_solve(K, rhs):
         k0, k1, k2, ka = K[p, 0], K[p, 1], K[p, 2], K[p, a]
         inv = 1.0 / K[p, p]
         f0, f1, f2, fa = k0 * inv, k1 * inv, k2 * inv, ka * inv
-        K[0, 0] -= f0 * k0
-        K[1, 0] -= f1 * k0
-        K[1, 1] -= f1 * k1
-        K[2, 0] -= f2 * k0
-        K[2, 1] -= f2 * k1
-        K[2, 2] -= f2 * k2
+        y = rhs[p]
+        _into_chassis(K, rhs, k0, k1, k2, f0, f1, f2, y)
         K[a, 0] -= fa * k0
         K[a, 1] -= fa * k1
         K[a, 2] -= fa * k2
         K[a, a] -= fa * ka
-        y = rhs[p]
-        rhs[0] -= f0 * y
-        rhs[1] -= f1 * y
-        rhs[2] -= f2 * y
         rhs[a] -= fa * y
     for a in range(3, 5):
         k0, k1, k2 = K[a, 0], K[a, 1], K[a, 2]
         inv = 1.0 / K[a, a]
-        f0, f1, f2 = k0 * inv, k1 * inv, k2 * inv
-        K[0, 0] -= f0 * k0
-        K[1, 0] -= f1 * k0
-        K[1, 1] -= f1 * k1
-        K[2, 0] -= f2 * k0
-        K[2, 1] -= f2 * k1
-        K[2, 2] -= f2 * k2
-        y = rhs[a]
-        rhs[0] -= f0 * y
-        rhs[1] -= f1 * y
-        rhs[2] -= f2 * y
+        _into_chassis(K, rhs, k0, k1, k2, k0 * inv, k1 * inv, k2 * inv, rhs[a])
     # chassis block: LDL^T, forward and back substitution
     d0 = K[0, 0]
     l10, l20 = K[1, 0] / d0, K[2, 0] / d0
