@@ -43,6 +43,10 @@ class RowIndex:
     step: np.ndarray
 
 
+#: Factors of one key stacked before they are merged into its running factor by one QR.
+_MERGE_BATCH = 32
+
+
 @dataclass
 class RowStatistics:
     """Per (segment, coordinate), in the order first seen: the triangular factor ``R`` of its rows
@@ -59,14 +63,23 @@ class RowStatistics:
     def add(self, key: tuple[str, str], rows: np.ndarray, count: int | None = None) -> None:
         """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR over the
         columns that are not zero in the rows or the factor: a key's rows leave most columns zero).
-        ``count``: the rows they stand for when they are themselves a factor (default m)."""
+        ``count``: the rows they stand for when they are themselves a factor (default m); factors
+        are merged a batch at a time (one QR per :data:`_MERGE_BATCH` logs instead of one per log)."""
         if rows.shape[0] == 0:
             return
-        old = self.factors.get(key)
-        if old is not None and not old.any():
-            old = None
-        self.factors[key] = triangular_rows(rows, self.width + 1, old)
+        self.factors.setdefault(key, np.zeros((self.width + 1, self.width + 1)))
         self.counts[key] = self.counts.get(key, 0) + (rows.shape[0] if count is None else count)
+        pending = self.__dict__.setdefault("_pending", {}).setdefault(key, [])
+        pending.append(rows)
+        if count is None or len(pending) >= _MERGE_BATCH:
+            self._merge(key)
+
+    def _merge(self, key: tuple[str, str]) -> None:
+        pending = self.__dict__.get("_pending", {}).pop(key, [])
+        if not pending:
+            return
+        old = self.factors[key]
+        self.factors[key] = triangular_rows(np.vstack(pending), self.width + 1, old if old.any() else None)
 
     @property
     def n_rows(self) -> int:
@@ -84,6 +97,7 @@ class RowStatistics:
 
     def factor(self, key: tuple[str, str]) -> np.ndarray:
         """Pseudo-rows ``R`` (width + 1, width + 1) of ``key``: ``R^T R`` is the normal matrix of its rows."""
+        self._merge(key)
         R = self.factors[key]
         if self.columns is None:
             return R
