@@ -14,7 +14,7 @@ no single residual (``ols``, ``wls``, ``bounded``) solve on them the same proble
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -339,9 +339,14 @@ class RegressionData:
 
     def recordings(self) -> Iterator[RecordingRows]:
         """Rows of each recording with the free columns only and ``y`` as in eq. (24)."""
+        for job in self.recording_jobs():
+            yield job()
+
+    def recording_jobs(self) -> Iterator[Callable[[], RecordingRows]]:
+        """:meth:`recordings` as one callable per recording that forms its rows when called."""
         if self.store is None:
             raise RuntimeError("these regression data keep no rows")
-        yield from self.store.free_rows(self.free, self.theta_fixed)
+        yield from self.store.free_jobs(self.free, self.theta_fixed)
 
 
 def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Sequence[int], theta_fixed: np.ndarray,

@@ -6,10 +6,11 @@ the residual RMS. Rows are kept as one ``[A | y]`` block per recording as they c
 the regression reads them as a view (:meth:`RowStore.free_rows`)."""
 from __future__ import annotations
 
+import functools
 import shutil
 import tempfile
 import weakref
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,6 +49,7 @@ class RowStore:
         self._cleanup: weakref.finalize | None = None
         self._keys = True
         self._spans: list[int] = []
+        self._rows: list[int] = []
 
     def add(self, rows: RecordingRows) -> None:
         A = rows.A if self.columns is None else rows.A[:, self.columns]
@@ -58,6 +60,7 @@ class RowStore:
         with their coordinate codes, steps and keys."""
         self._keys = self._keys and key is not None
         self._spans.append(int(step.max() - step.min()) + 1 if step.size else 0)
+        self._rows.append(int(rows.shape[0]))
         size = sum(x.nbytes for x in (rows, group, step, key) if x is not None)
         if self._bytes + size <= self.budget:
             self._items.append(_Packed(rows, group, step, key))
@@ -100,6 +103,12 @@ class RowStore:
     def free_rows(self, free: Sequence[int], theta_fixed: np.ndarray) -> Iterator[RecordingRows]:
         """Rows of each recording with the columns ``free`` only and ``y - A theta_fixed`` (eq. 24);
         A a view of the stored rows when they hold the free columns first, in this order."""
+        for job in self.free_jobs(free, theta_fixed):
+            yield job()
+
+    def free_jobs(self, free: Sequence[int], theta_fixed: np.ndarray) -> Iterator[Callable[[], RecordingRows]]:
+        """:meth:`free_rows` as one callable per recording that forms its rows when called (in a
+        worker thread, say); the recordings are only referenced here."""
         free = list(free)
         w = len(theta_fixed)
         stored = np.arange(w) if self.columns is None else self.columns
@@ -107,14 +116,22 @@ class RowStore:
         held = [i for i in range(w) if theta_fixed[stored[i]] != 0.0]
         values = theta_fixed[stored[held]]
         where = np.argsort(stored)[free] if not first else None
-        for p in self.packed():
+
+        def rows_of(p: _Packed) -> RecordingRows:
             y = p.rows[:, -1]
             if len(held) == 1:  # B_w alone (the default): one column, no copy of it
                 y = y - p.rows[:, held[0]] * values[0]
             elif held:
                 y = y - p.rows[:, held] @ values
             A = p.rows[:, :len(free)] if first else p.rows[:, where]
-            yield RecordingRows(A, y, p.group, p.step, p.key)
+            return RecordingRows(A, y, p.group, p.step, p.key)
+
+        for p in self.packed():
+            yield functools.partial(rows_of, p)
+
+    def row_counts(self) -> list[int]:
+        """Rows of each recording, without reading them back."""
+        return list(self._rows)
 
     def lengths(self) -> list[int]:
         """Steps each recording spans (last minus first step plus one), without reading rows back."""

@@ -31,11 +31,12 @@ autocorrelation time of the score components (Sokal's window), at least ``min_ba
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import scipy.fft
@@ -81,66 +82,84 @@ class Uncertainty:
         return stats.t.ppf(0.5 + level / 2, np.maximum(self.dof, 1.0))
 
 
-def _recording_weights(est: Estimator, data: RegressionData) -> Iterator[tuple[RecordingRows, np.ndarray]]:
-    """Each recording's rows (free columns, eq. 24) with the estimator's weight of each row."""
+def _recording_jobs(est: Estimator, data: RegressionData) -> Iterator[Callable[[], tuple[RecordingRows, np.ndarray]]]:
+    """One callable per recording returning its rows (free columns, eq. 24) and the estimator's
+    weight of each row; the rows are formed when it is called (in a worker thread)."""
     w = np.asarray(est.weights_, dtype=float)
     if data.row_order is not None:
         w = w[data.row_order]
     if data.pseudo:  # one weight per generalized coordinate
         per_group = np.ones(len(data.group_names))
         per_group[data.group] = w
+
+    def weighed(job: Callable[[], RecordingRows], start: int | None) -> tuple[RecordingRows, np.ndarray]:
+        rec = job()
+        return rec, (per_group[rec.group] if start is None else w[start:start + rec.y.size])
+
     start = 0
-    for rec in data.recordings():
-        m = rec.y.size
-        yield rec, (per_group[rec.group] if data.pseudo else w[start:start + m])
-        start += m
+    for job, rows in zip(data.recording_jobs(), data.store.row_counts()):
+        yield functools.partial(weighed, job, None if data.pseudo else start)
+        start += rows
+
+
+def _recording_weights(est: Estimator, data: RegressionData) -> Iterator[tuple[RecordingRows, np.ndarray]]:
+    """Each recording's rows (free columns, eq. 24) with the estimator's weight of each row."""
+    for job in _recording_jobs(est, data):
+        yield job()
 
 
 def _step_scores(est: Estimator, data: RegressionData, max_steps: int | None = None) -> Iterator[np.ndarray]:
     """Scores ``a_i w_i r_i`` summed per time step, one dense (T_rec, p) array per recording (missing
     steps zero; only the first ``max_steps`` steps when given); one recording at a time."""
-    coef = est.coef_
     for rec, w in _recording_weights(est, data):
-        idx = rec.step - int(rec.step.min())
-        if max_steps is not None and idx.max() >= max_steps:
-            keep = idx < max_steps
-            idx, A, y, w, group = idx[keep], rec.A[keep], rec.y[keep], w[keep], rec.group[keep]
-        else:
-            A, y, group = rec.A, rec.y, rec.group
-        scores = A * (w * (y - A @ coef))[:, None]
-        T, p = int(idx.max()) + 1, scores.shape[1]
-        groups = [group == g for g in np.unique(group)]
-        if all(np.all(np.diff(idx[sel]) > 0) for sel in groups):  # one row per coordinate and step (our stores)
-            dense = np.zeros((T, p))
-            for sel in groups:
-                dense[idx[sel]] += scores[sel]
-        else:  # repeated steps within a coordinate: summed by one bincount
-            flat = (idx[:, None] * p + np.arange(p)).ravel()
-            dense = np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
-        yield dense
+        yield _dense_scores(rec, w, est.coef_, max_steps)
 
 
-def correlation_time(series: Iterable[np.ndarray], *, window: float = 5.0, max_steps: int = 1 << 15,
-                     workers: int = 1) -> np.ndarray:
+def _dense_scores(rec: RecordingRows, w: np.ndarray, coef: np.ndarray, max_steps: int | None) -> np.ndarray:
+    """One recording's scores summed per time step (see :func:`_step_scores`)."""
+    idx = rec.step - int(rec.step.min())
+    if max_steps is not None and idx.max() >= max_steps:
+        keep = idx < max_steps
+        idx, A, y, w, group = idx[keep], rec.A[keep], rec.y[keep], w[keep], rec.group[keep]
+    else:
+        A, y, group = rec.A, rec.y, rec.group
+    scores = A * (w * (y - A @ coef))[:, None]
+    T, p = int(idx.max()) + 1, scores.shape[1]
+    groups = [group == g for g in np.unique(group)]
+    if all(np.all(np.diff(idx[sel]) > 0) for sel in groups):  # one row per coordinate and step (our stores)
+        dense = np.zeros((T, p))
+        for sel in groups:
+            dense[idx[sel]] += scores[sel]
+    else:  # repeated steps within a coordinate: summed by one bincount
+        flat = (idx[:, None] * p + np.arange(p)).ravel()
+        dense = np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
+    return dense
+
+
+def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *, window: float = 5.0,
+                     max_steps: int = 1 << 15, workers: int = 1, lengths: Iterable[int] | None = None) -> np.ndarray:
     """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
     ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
 
     Each recording contributes at most its first ``max_steps`` steps (65 s at 500 Hz), and
     recordings are pooled until ``4 * max_steps`` steps: the correlation times are tens to hundreds
     of steps, so this is plenty, and the cost does not grow with the length or number of the logs.
-    ``workers``: threads taking the recordings' autocorrelations while the next ones are read.
+    ``workers``: threads taking the recordings' autocorrelations. ``series`` may hold callables
+    that return a recording's array when called (in those threads); ``lengths`` then gives each
+    one's number of rows.
     """
-    def taken() -> Iterator[np.ndarray]:
+    def taken() -> Iterator[np.ndarray | Callable[[], np.ndarray]]:
         pooled = 0
-        for x in series:
+        for x, n in zip(series, lengths if lengths is not None else iter(lambda: None, 0)):
             if pooled >= 4 * max_steps:
                 return
-            pooled += min(x.shape[0], max_steps)
-            yield x[:max_steps]
+            pooled += min(x.shape[0] if n is None else n, max_steps)
+            yield x
 
     fft_threads = -1 if workers <= 1 else 1
     acf = None
-    for c in ordered_map(lambda x: _autocovariance(x, fft_threads), taken(), workers, "agvdyn-acf"):
+    for c in ordered_map(lambda x: _autocovariance((x() if callable(x) else x)[:max_steps], fft_threads), taken(),
+                         workers, "agvdyn-acf"):
         acf = c if acf is None else _pad_add(acf, c)
     p = acf.shape[1]
     rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
@@ -202,7 +221,8 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
 
     pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
     last_step = None
-    for first, last, ids, G, b in ordered_map(sums, _recording_weights(est, data), workers, "agvdyn-blocks"):
+    for first, last, ids, G, b in ordered_map(lambda job: sums(job()), _recording_jobs(est, data), workers,
+                                              "agvdyn-blocks"):
         new_log = last_step is None or first <= last_step  # steps start again: another log
         last_step = last
         if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
@@ -365,7 +385,9 @@ def parameter_uncertainty(method: UncertaintyMethod | str, est: Estimator, data:
     if method is UncertaintyMethod.CLASSIC:
         return Uncertainty(method, est.cov_, {"sigma2": float(est.sigma2_)})
     lengths = data.store.lengths()  # without reading the rows back
-    tau = correlation_time(_step_scores(est, data, max_steps=1 << 15), workers=workers)
+    scores = (functools.partial(lambda job: _dense_scores(*job(), est.coef_, 1 << 15), job)
+              for job in _recording_jobs(est, data))  # formed in the threads
+    tau = correlation_time(scores, workers=workers, lengths=lengths)
     L = int(bandwidth) if bandwidth is not None else int(min(max(min_bandwidth, math.ceil(bandwidth_factor * tau.max())),
                                                               max(1, max(lengths) // 4)))
     details: dict[str, Any] = {"bandwidth_steps": L, "correlation_time_steps": float(tau.max()),
