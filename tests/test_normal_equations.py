@@ -65,7 +65,7 @@ def test_identify_streams_logs_and_keeps_no_blocks_when_asked(noisy_log):
 
 def test_threads_give_the_same_answer_and_the_default_follows_the_environment(noisy_log, monkeypatch):
     """Logs reduced and jackknife blocks summed in threads are merged in order: the same numbers, to
-    the last bit; the default thread count is the cores (at most 4) unless AGVDYN_THREADS says."""
+    the last bit; the default thread count is the cores (at most 2) unless AGVDYN_THREADS says."""
     from agvdyn.identification._threads import default_workers
 
     logs = [noisy_log] * 3
@@ -78,7 +78,7 @@ def test_threads_give_the_same_answer_and_the_default_follows_the_environment(no
     with pytest.raises(ValueError, match="AGVDYN_THREADS='0'"):
         default_workers()
     monkeypatch.delenv("AGVDYN_THREADS")
-    assert 1 <= default_workers() <= 4
+    assert 1 <= default_workers() <= 2
 
 
 def test_row_store_spills_to_disk_and_reads_back_the_same_rows():

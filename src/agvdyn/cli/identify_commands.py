@@ -189,7 +189,7 @@ def identify(
         "--experiment", help="auto (from the segment labels), vehicle, or lifted-wheel: the single-axis test "
                              "of sec. 7 (wheels off the ground) gives B_w and the wheel friction without load.")] = "auto",
     threads: Annotated[Optional[int], typer.Option(
-        "--threads", min=1, help="Threads reading and reducing the logs (default: the cores, at most 4; "
+        "--threads", min=1, help="Threads reading and reducing the logs (default: the cores, at most 2; "
                                  "or AGVDYN_THREADS). The result does not depend on it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:

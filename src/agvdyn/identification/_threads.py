@@ -16,10 +16,11 @@ R = TypeVar("R")
 
 def default_workers() -> int:
     """Threads that read and reduce logs at once by default: the cores this process may use, at
-    most 4 (the compiled kernels, pyarrow, LAPACK and BLAS release the GIL). Measured on 25 logs of
-    35,500 samples on an idle 2-core machine: 2 threads 1.4-1.6x one (docs/identification.md,
-    "Speed"); with :func:`agvdyn._memory.keep_freed_memory`'s single malloc arena the extra
-    thread costs ~30 MB. The environment variable ``AGVDYN_THREADS`` overrides it."""
+    most 2 (the compiled kernels, pyarrow, LAPACK and BLAS release the GIL). Measured on 25 logs of
+    35,500 samples on an idle 2-core machine: 2 threads 1.3-1.6x one (docs/identification.md,
+    "Speed"), for ~40 MB more; on a long log read in pieces each thread's buffers cost 120-170 MB
+    (10 h log: 674 MB on one thread, 842 MB on two), so more threads by default would break the
+    1 GB bound. The environment variable ``AGVDYN_THREADS`` overrides it."""
     env = os.environ.get("AGVDYN_THREADS", "").strip()
     if env:
         if not env.isdigit() or int(env) < 1:
@@ -29,7 +30,7 @@ def default_workers() -> int:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
         cores = os.cpu_count() or 1
-    return max(1, min(4, cores))
+    return max(1, min(2, cores))
 
 
 def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, name: str = "agvdyn") -> Iterator[R]:

@@ -89,7 +89,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
     mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
     keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
-    workers : threads that read and reduce logs at once (default :func:`default_workers`: the cores, at most 4); the
+    workers : threads that read and reduce logs at once (default :func:`default_workers`: the cores, at most 2); the
         result does not depend on it (logs are merged in their order).
 
     The first call asks glibc to keep freed memory for reuse (:func:`.workspace.keep_freed_memory`).
