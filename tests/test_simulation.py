@@ -245,7 +245,7 @@ def test_coriolis_terms_do_no_spurious_work():
     """v^T h(alpha, v) = 1/2 v^T dM/dt v for random states (steering-unit masses on): the Coriolis and
     centrifugal terms of the body-frame equations exchange no energy beyond the change of M(alpha).
     A sign or factor error in any unit term breaks it (checked against finite differences of M)."""
-    from agvdyn.simulation._kernels import _bias, _mass_matrix
+    from agvdyn.simulation._plant_kernels import _bias, _mass_matrix
 
     c = plant_constants(G, P, replace(PlantSettings(), unit_mass=60.0))
     rng = np.random.default_rng(0)
@@ -351,8 +351,8 @@ def test_sparse_plant_terms_equal_the_dense_products():
     dense products at random states: A exactly equal to kinematics' constraint matrix (rolling
     radii r), A v and K to rounding."""
     from agvdyn.kinematics import constraint_matrix
-    from agvdyn.simulation._kernels import (_constraint_rows, _inertia_terms, _iteration_matrix,
-                                            _slip_velocities, _unit_trig)
+    from agvdyn.simulation._plant_kernels import (_constraint_rows, _inertia_terms, _iteration_matrix,
+                                                  _slip_velocities, _unit_trig)
 
     c = plant_constants(G, P, replace(PlantSettings(), wheel_radius_error=(0.0,) * 4))
     rng = np.random.default_rng(3)
@@ -374,8 +374,8 @@ def test_arrow_solve_equals_the_dense_solve():
     """The plant step's solve of K x = rhs (wheels, then steering sides, then the chassis block
     eliminated) against numpy's dense solve of the symmetric K at random states, with joint
     friction and a stop on the diagonal."""
-    from agvdyn.simulation._kernels import (_arrow_solve, _constraint_rows, _inertia_terms, _iteration_matrix,
-                                            _unit_trig)
+    from agvdyn.simulation._plant_kernels import (_arrow_solve, _constraint_rows, _inertia_terms,
+                                                  _iteration_matrix, _unit_trig)
 
     c = plant_constants(G, P, PlantSettings())
     rng = np.random.default_rng(11)
@@ -398,7 +398,7 @@ def test_arrow_solve_equals_the_dense_solve():
 
 def test_tanh_ratio_equals_tanh_over_x():
     """The tyres' saturation tanh(x)/x from x^2 (Taylor series below x = 0.2) to round-off."""
-    from agvdyn.simulation._kernels import _tanh_ratio
+    from agvdyn.simulation._plant_kernels import _tanh_ratio
 
     for x in np.concatenate([[0.0, 1e-12, 1e-5], np.linspace(1e-4, 0.2, 2001), [0.2 + 1e-12, 0.3, 1.0, 5.0, 50.0]]):
         want = 1.0 if x == 0 else math.tanh(x) / x

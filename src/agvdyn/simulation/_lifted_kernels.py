@@ -1,15 +1,16 @@
 """Compiled loop of the lifted-wheel experiment (sec. 7): wheels off the ground, each driven by its
-speed loop; the plant constants, friction and sensors are those of :mod:`agvdyn.simulation._kernels`."""
+speed loop; the plant constants and friction are those of :mod:`._plant_kernels`, the sensors those of :mod:`._kernels`."""
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
 from agvdyn._numba_cache import drop_stale_cache
-from agvdyn.simulation import _kernels
-from agvdyn.simulation._kernels import _BW, _DCW, _DVW, _IG, _TLIM, _friction_terms, read_sensors
+from agvdyn.simulation import _kernels, _plant_kernels
+from agvdyn.simulation._kernels import read_sensors
+from agvdyn.simulation._plant_kernels import _BW, _DCW, _DVW, _IG, _TLIM, _friction_terms
 
-drop_stale_cache(__file__, _kernels.__file__)
+drop_stale_cache(__file__, _kernels.__file__, _plant_kernels.__file__)
 
 
 @njit(cache=True)

@@ -40,7 +40,7 @@ regularisation 100 times narrower than the model's tanh with epsilon = 0.01 rad/
 at up to 0.01 rad/s under any torque); above it the joint slides with ``d_c sign(v)``.
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
-All compiled code is in ``_kernels.py`` (see there why).
+The compiled plant is in ``_plant_kernels.py``, the closed loop that drives it in ``_kernels.py``.
 """
 from __future__ import annotations
 
@@ -54,10 +54,11 @@ from agvdyn.platform import EPSILON, Geometry, Parameters
 
 GRAVITY = 9.81
 
-from agvdyn.simulation._kernels import (  # noqa: F401  (compiled plant, re-exported)
+from agvdyn.simulation._kernels import kinetic_energy, run_open_loop  # noqa: F401  (compiled, re-exported)
+from agvdyn.simulation._plant_kernels import (  # noqa: F401  (compiled plant, re-exported)
     _A, _B, _BW, _CB, _CLAT, _CLONG, _COUL, _DCL, _DCR, _DSTOP, _DVL, _DVR, _DVW, _DCW, _EPS, _EU, _FZ, _IG,
     _JUL, _JUR, _KSTOP, _L, _MB, _MU, _MU_MASS, _NCONST, _R, _RATIO, _RW, _TLIM, _V0, _VSTICK, _VSTRIB,
-    _mass_matrix, kinetic_energy, plant_step, run_open_loop,
+    _mass_matrix, plant_step,
 )
 
 _COULOMB = {"stiction": 0.0, "tanh": 1.0, "none": 2.0}
