@@ -59,6 +59,8 @@ class RowStatistics:
     #: natural column of each column of the rows as added (None: natural order); factors are
     #: kept in that order, :meth:`factor` returns them in the natural one
     columns: np.ndarray | None = None
+    #: factors added per key and not yet merged (see :meth:`add`)
+    _pending: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict, repr=False)
 
     def add(self, key: tuple[str, str], rows: np.ndarray, count: int | None = None) -> None:
         """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR over the
@@ -69,13 +71,13 @@ class RowStatistics:
             return
         self.factors.setdefault(key, np.zeros((self.width + 1, self.width + 1)))
         self.counts[key] = self.counts.get(key, 0) + (rows.shape[0] if count is None else count)
-        pending = self.__dict__.setdefault("_pending", {}).setdefault(key, [])
+        pending = self._pending.setdefault(key, [])
         pending.append(rows)
         if count is None or len(pending) >= _MERGE_BATCH:
             self._merge(key)
 
     def _merge(self, key: tuple[str, str]) -> None:
-        pending = self.__dict__.get("_pending", {}).pop(key, [])
+        pending = self._pending.pop(key, [])
         if not pending:
             return
         old = self.factors[key]

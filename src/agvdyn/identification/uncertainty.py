@@ -32,6 +32,7 @@ autocorrelation time of the score components (Sokal's window), at least ``min_ba
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -150,7 +151,7 @@ def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *,
     """
     def taken() -> Iterator[np.ndarray | Callable[[], np.ndarray]]:
         pooled = 0
-        for x, n in zip(series, lengths if lengths is not None else iter(lambda: None, 0)):
+        for x, n in zip(series, itertools.repeat(None) if lengths is None else lengths):
             if pooled >= 4 * max_steps:
                 return
             pooled += min(x.shape[0] if n is None else n, max_steps)
@@ -251,18 +252,15 @@ def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
     no reordered copy of the rows). Weights that change from row to row are applied to the rows."""
     p = A.shape[1]
     change = np.diff(block) != 0
-    change |= np.diff(w) != 0
+    reweighed = np.diff(w) != 0
+    per_row = np.count_nonzero(reweighed) > block.size // 16  # e.g. robust weights: weigh the rows
+    if not per_row:
+        change |= reweighed
     bounds = np.concatenate([[0], np.flatnonzero(change) + 1, [block.size]])
-    per_row = bounds.size > block.size // 16  # e.g. robust weights: weigh the rows instead
     ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
     Ay = np.empty((A.shape[0], p + 1))
     Ay[:, :p], Ay[:, p] = A, y
-    if per_row:
-        bounds = np.concatenate([[0], np.flatnonzero(np.diff(block)) + 1, [block.size]])
-        ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
-        Aw, scale = A * w[:, None], np.ones(bounds.size - 1)
-    else:
-        Aw, scale = A, w[bounds[:-1]]
+    Aw, scale = (A * w[:, None], np.ones(bounds.size - 1)) if per_row else (A, w[bounds[:-1]])
     moments = np.zeros((ids.size, p, p + 1))
     part = np.empty((p, p + 1))
     for j, a, e, c in zip(which.tolist(), bounds[:-1].tolist(), bounds[1:].tolist(), scale.tolist()):
