@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import pytest
+from hypothesis import given, settings as hsettings, strategies as hst
 
+from agvdyn._trig import sincos_steering
 from agvdyn.dynamics import regressor_signals
 from agvdyn.identification import IdentificationSettings
 from agvdyn.identification._kernels import recording_breaks
@@ -134,3 +137,27 @@ def test_recording_breaks_equal_the_numpy_rules():
     assert "dropout" in notes[0] and "steering" in notes[1] and "wheel" in notes[2]
     kind = np.empty(n - 1, dtype=np.int8)
     assert recording_breaks(t, alpha, beta, 1.0, 10.0, 10.0, kind) == 0
+
+
+@numba.njit(cache=False)
+def _sincos_of(x, out):
+    for i in range(x.size):
+        out[i, 0], out[i, 1] = sincos_steering(x[i])
+
+
+@hsettings(deadline=None)
+@given(hst.lists(hst.floats(-math.pi / 2, math.pi / 2), min_size=1, max_size=50))
+def test_sincos_of_a_steering_angle_is_within_one_ulp_of_numpy(angles):
+    x = np.array(angles + [math.pi / 2, -math.pi / 2, math.pi / 4, 0.0, 1e-300])
+    out = np.empty((x.size, 2))
+    _sincos_of(x, out)
+    for got, want in ((out[:, 0], np.sin(x)), (out[:, 1], np.cos(x))):
+        assert np.all(np.abs(got - want) <= np.spacing(np.abs(want)))
+
+
+def test_sincos_of_a_steering_angle_is_exact_on_most_of_a_grid():
+    x = np.linspace(-math.pi / 2, math.pi / 2, 100_001)
+    out = np.empty((x.size, 2))
+    _sincos_of(x, out)
+    assert np.mean(out[:, 0] == np.sin(x)) > 0.9 and np.mean(out[:, 1] == np.cos(x)) > 0.9
+    assert np.max(np.abs(out[:, 1] - np.cos(x)) / np.spacing(np.abs(np.cos(x)))) <= 1.0

@@ -21,9 +21,11 @@ import numba
 import numpy as np
 
 from agvdyn._numba_cache import drop_stale_cache
+from agvdyn import _trig
+from agvdyn._trig import sincos_steering
 from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, models, wheel_frame
 
-drop_stale_cache(__file__, constraints.__file__, models.__file__)
+drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__)
 
 __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
 
@@ -45,7 +47,8 @@ def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
 def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no cover - compiled
     """Chassis velocities of eq. (3) and the slip speed per wheel of row j, as
     ``agvdyn.odometry._odometry`` (the rows of eq. 1-2 without their zeros; same sums)."""
-    sl, cl, sr, cr = np.sin(al), np.cos(al), np.sin(ar), np.cos(ar)
+    sl, cl = sincos_steering(al)
+    sr, cr = sincos_steering(ar)
     trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
     ad0, ad1 = qd[j, 3], qd[j, 4]
     for i in range(4):
