@@ -38,30 +38,33 @@ def parse_sidecar(text: str, where: Path | str) -> dict[str, Any]:
     return data
 
 
+#: A line at column 0 that starts a top-level entry: not blank, indented, a comment or a ``-`` item.
+_TOP_LINE = re.compile(r"^(?!$|[ #]|-(?: |$))[^\n]*", re.M)
+#: Characters that end a line for ``str.splitlines`` besides "\n", quotes, anchors, aliases and tabs:
+#: a text holding any of them is parsed whole.
+_NOT_PLAIN = "\"'&*\t\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+
+
 def _entries(text: str) -> dict[str, str] | None:
     """The text of each top-level entry of a plain block mapping (see the module docstring), None
-    for any other text."""
-    if any(c in text for c in "\"'&*\t"):
+    for any other text. Regular expressions over the whole text, not a loop over its lines (a
+    simulator's sidecar has ~200 lines and is read with every log)."""
+    if any(c in text for c in _NOT_PLAIN):
         return None
-    entries: dict[str, list[str]] = {}
-    current: list[str] | None = None
-    for line in text.splitlines(keepends=True):
+    lines = text.split("\n")
+    for line in (x for x in lines if "[" in x or "]" in x or "{" in x or "}" in x):
         if line.count("[") != line.count("]") or line.count("{") != line.count("}"):
             return None
-        if line.startswith(" ") or not line.strip() or line.startswith("- ") or line.rstrip() == "-":
-            if current is None:
-                if line.strip():
-                    return None
-                continue
-            current.append(line)
-        elif line.startswith("#"):
-            continue
-        else:
-            match = _KEY.match(line)
-            if match is None or match.group(1) in entries:
-                return None
-            current = entries[match.group(1)] = [line]
-    return {key: "".join(lines) for key, lines in entries.items()}
+    starts = [m.start() for m in _TOP_LINE.finditer(text)]
+    if not starts or any(line.strip() and not line.startswith("#") for line in text[:starts[0]].split("\n")):
+        return None
+    entries: dict[str, str] = {}
+    for a, e in zip(starts, starts[1:] + [len(text)]):
+        match = _KEY.match(text, a)
+        if match is None or match.group(1) in entries:
+            return None
+        entries[match.group(1)] = text[a:e]
+    return entries
 
 
 class LazySidecar:
