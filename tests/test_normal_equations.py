@@ -46,13 +46,15 @@ def test_gram_blocks_give_the_stacked_answer(noisy_log, estimator, uncertainty):
     ref = fit_blocks(blocks, PROTOTYPE, settings=settings, stacked=True)
     assert fast.n_rows == ref.n_rows
     np.testing.assert_allclose(_vector(fast), _vector(ref), rtol=1e-9)
-    # the sandwich covariances sum scores of near-cancelling residuals (round-off shows at ~1e-8);
+    # the sandwich covariances sum scores of near-cancelling residuals (round-off shows at ~1e-8, up to
+    # 1.4e-7 for a parameter near its bound);
     # the bootstrap re-solves normal equations per replicate (round-off times cond^2)
     np.testing.assert_allclose([fast.std[n] for n in ref.std], [ref.std[n] for n in ref.std],
-                               rtol={"classic": 1e-9, "hac": 1e-7, "jackknife": 1e-7, "bootstrap": 1e-4}[uncertainty])
+                               rtol={"classic": 1e-9, "hac": 1e-6, "jackknife": 1e-6, "bootstrap": 1e-4}[uncertainty])
     np.testing.assert_allclose(fast.condition_number, ref.condition_number, rtol=1e-9)
     assert fast.residual_rms.keys() == ref.residual_rms.keys()
-    np.testing.assert_allclose(list(fast.residual_rms.values()), list(ref.residual_rms.values()), rtol=1e-9)
+    # a residual of this near-exact fit (|r| ~ 1e-3 |y|) moves ~3e3x more than the parameters it comes from
+    np.testing.assert_allclose(list(fast.residual_rms.values()), list(ref.residual_rms.values()), rtol=1e-8)
 
 
 def test_identify_streams_logs_and_keeps_no_blocks_when_asked(noisy_log):

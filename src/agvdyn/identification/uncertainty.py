@@ -42,6 +42,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 import numpy as np
 import scipy.fft
 
+from agvdyn.identification._kernels import block_moments
 from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
@@ -247,28 +248,16 @@ def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block ids present (sorted) and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b``
-    (nb, p): one BLAS product per run of rows of one block and one weight (the rows come per
-    coordinate in time order and weigh alike per coordinate, so a block is a few runs; no sort and
-    no reordered copy of the rows). Weights that change from row to row are applied to the rows."""
+    (nb, p), summed row by row in one compiled pass (:func:`._kernels.block_moments`, without the
+    GIL: recordings in threads)."""
     p = A.shape[1]
-    change = np.diff(block) != 0
-    reweighed = np.diff(w) != 0
-    per_row = np.count_nonzero(reweighed) > block.size // 16  # e.g. robust weights: weigh the rows
-    if not per_row:
-        change |= reweighed
-    bounds = np.concatenate([[0], np.flatnonzero(change) + 1, [block.size]])
-    ids, which = np.unique(block[bounds[:-1]], return_inverse=True)
-    Ay = np.empty((A.shape[0], p + 1))
-    Ay[:, :p], Ay[:, p] = A, y
-    Aw, scale = (A * w[:, None], np.ones(bounds.size - 1)) if per_row else (A, w[bounds[:-1]])
-    moments = np.zeros((ids.size, p, p + 1))
-    part = np.empty((p, p + 1))
-    for j, a, e, c in zip(which.tolist(), bounds[:-1].tolist(), bounds[1:].tolist(), scale.tolist()):
-        np.matmul(Aw[a:e].T, Ay[a:e], out=part)
-        if c != 1.0:
-            part *= c
-        moments[j] += part
-    return ids, moments[:, :, :-1], moments[:, :, -1]
+    first = int(block.min())
+    moments = np.zeros((int(block.max()) - first + 1, p, p + 1))
+    count = np.zeros(moments.shape[0], dtype=np.int64)
+    block_moments(np.ascontiguousarray(block, dtype=np.int64), np.asarray(A, dtype=float),  # A: a view, not copied
+                  np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(y, dtype=float), first, moments, count)
+    present = np.flatnonzero(count)
+    return present + first, moments[present, :, :p], moments[present, :, p]
 
 
 def _bootstrap(est: Estimator, data: RegressionData, L: int, replicates: int, seed: int) -> np.ndarray:
