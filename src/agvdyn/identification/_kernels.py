@@ -9,7 +9,6 @@ over small temporaries, one sample at a time, and releases the GIL (recordings i
   :func:`agvdyn.identification.rows.row_modes`);
 * :func:`stretch_projection`: the rows of eq. (19), ``H_k^T Theta``, ``H_k^T B u``, the
   generalized velocities and the kept rows (stiction mask and guard) of every run of one mode;
-* :func:`block_moments`: the jackknife's weighted Gram and score sums per block of rows;
 * :func:`kept_rows`: the kept rows of a log's blocks, ``[H_k^T Theta | H_k^T B | H_k^T B u]``, in
   one array (the input of the normal equations and of the row store).
 
@@ -28,8 +27,7 @@ from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, 
 
 drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__)
 
-__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "block_moments",
-           "SIGNAL_CHANNELS"]
+__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
@@ -356,23 +354,3 @@ def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step
             count += 1
     return count
 
-
-@numba.njit(cache=True, nogil=True)
-def block_moments(block, A, w, y, first, out, count):  # pragma: no cover - compiled
-    """Add ``w_i a_i^T [a_i | y_i]`` of every row i of ``A`` (m, p; a view of any strides) to
-    ``out[block[i] - first]`` (nb, p, p + 1) and count the rows of each block in ``count`` (nb,);
-    zero entries of a row are skipped (a coordinate's rows use a few of the columns)."""
-    m, p = A.shape
-    row = np.empty(p + 1)
-    for i in range(m):
-        j = block[i] - first
-        count[j] += 1
-        for b in range(p):
-            row[b] = A[i, b]
-        row[p] = y[i]
-        for a in range(p):
-            wa = w[i] * row[a]
-            if wa == 0.0:
-                continue
-            for b in range(p + 1):
-                out[j, a, b] += wa * row[b]

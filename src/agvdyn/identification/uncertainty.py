@@ -42,7 +42,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 import numpy as np
 import scipy.fft
 
-from agvdyn.identification._kernels import block_moments
+from agvdyn.identification._uncertainty_kernels import block_changes, block_moments
 from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
@@ -332,15 +332,16 @@ def _block_changes(half: np.ndarray, G: np.ndarray, S: np.ndarray
     ``sum_b d_b^4`` of the changes ``d_b = B (I - G_b B)^-1 S_b``, the number of blocks, their
     largest leverage, how many exceed LEVERAGE_WARNING and the columns of directions one block
     alone determines (leverage above MAX_LEVERAGE, capped there)."""
-    p = half.shape[0]
-    M = half @ G @ half  # B^1/2 G_b B^1/2, eigenvalues = block leverages
-    M = (M + np.swapaxes(M, 1, 2)) / 2
-    x = S @ half  # B^1/2 S_b (half is symmetric)
-    trace = np.einsum("bii->b", M)  # >= the largest leverage (M is positive semi-definite)
+    nb, p = S.shape
+    # M_b = B^1/2 G_b B^1/2 (eigenvalues: block leverages), its trace (>= the largest leverage, M
+    # is positive semi-definite) and x_b = B^1/2 S_b; where the trace allows no leverage above 0.5,
+    # x_b solves (I - M_b) x = B^1/2 S_b (compiled, per block)
+    M, x, trace = np.empty((nb, p, p)), np.empty((nb, p)), np.empty(nb)
+    block_changes(np.ascontiguousarray(half), np.ascontiguousarray(G), np.ascontiguousarray(S), LEVERAGE_WARNING,
+                  M, x, trace)
     low = trace <= LEVERAGE_WARNING
     top, above, capped = 0.0, 0, set()
-    if low.any():  # every leverage <= 0.5: (I - M_b) x = B^1/2 S_b solved directly
-        x[low] = np.linalg.solve(np.eye(p) - M[low], x[low][..., None])[..., 0]
+    if low.any():
         top = _largest_leverage(M[low], trace[low], top)
     high = np.flatnonzero(~low)
     if high.size:  # the leverages: capped at MAX_LEVERAGE, counted, the largest reported
