@@ -117,13 +117,14 @@ def _padlen(order: int, normalized_cutoff: float) -> int:
     return 3 * (2 * len(sos) + 1 - min((sos[:, 2] == 0).sum(), (sos[:, 5] == 0).sum()))
 
 
-def uniform_sample_time(t: np.ndarray, *, rtol: float = 1e-3, source: str = "t") -> float:
-    """Sample time of a uniformly sampled time vector; ``ValueError`` naming the first bad row otherwise."""
+def uniform_sample_time(t: np.ndarray, *, rtol: float = 1e-3, source: str = "t", median: float | None = None) -> float:
+    """Sample time of a uniformly sampled time vector; ``ValueError`` naming the first bad row otherwise.
+    ``median``: the median time step when it is already known."""
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 3:
         raise ValueError(f"{source}: expected a 1-D time vector with at least 3 samples, got shape {t.shape}")
     steps = np.diff(t)
-    dt = float(np.median(steps))
+    dt = float(np.median(steps)) if median is None else float(median)
     if not dt > 0:
         raise ValueError(f"{source}: median time step {dt} s, expected > 0 (strictly increasing time)")
     bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)

@@ -258,7 +258,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         own[:] = False
         own[core] = True
     counts = RowCounts(samples=int(own.sum()), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
-    bounds, notes, nominal = stretches_of(t, alpha, beta, settings)
+    bounds, notes, nominal = stretches_of(t, alpha, beta, settings, getattr(log, "sample_time", None))
     notes = [f"{source}: {n}" for n in notes]
     min_rows = min_stretch_rows(settings, nominal)
     stretches, modes = [], np.zeros(t.size, dtype=np.int8)
@@ -268,7 +268,8 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             notes.append(f"{source}: rows {a}..{b - 1} ({b - a} samples) skipped: a continuous stretch needs more "
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
-        st = filtered_stretch(geometry, log, a, b, settings, workspace, f"#{len(stretches)}")
+        st = filtered_stretch(geometry, log, a, b, settings, workspace, f"#{len(stretches)}",
+                              nominal if (a, b) == (0, t.size) else None)  # one stretch: the log's median step
         mode, av = _modes_and_virtual_angle(geometry, st, settings)
         stretches.append((st, av))
         modes[a:b] = mode

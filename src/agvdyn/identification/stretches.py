@@ -132,12 +132,13 @@ def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings:
     return bounds, reasons
 
 
-def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings
-                 ) -> tuple[list[tuple[int, int]], list[str], float]:
-    """:func:`stretch_bounds` and the nominal (median) time step of the log (NaN for one sample)."""
+def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings,
+                 nominal: float | None = None) -> tuple[list[tuple[int, int]], list[str], float]:
+    """:func:`stretch_bounds` and the nominal (median) time step of the log (NaN for one sample;
+    ``nominal`` when it is already known)."""
     if t.size < 2:
         return [(0, t.size)], [], math.nan
-    nominal = float(np.median(np.diff(t)))
+    nominal = float(np.median(np.diff(t))) if nominal is None else float(nominal)
     kind = np.empty(t.size - 1, dtype=np.int8)
     found = recording_breaks(t, alpha, beta, settings.stretch_gap * nominal, settings.steering_jump_rate * nominal,
                              settings.wheel_jump_rate * nominal, kind)
@@ -153,7 +154,7 @@ def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: I
 
 
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
-                     workspace: Workspace | None = None, tag: str = "") -> Stretch:
+                     workspace: Workspace | None = None, tag: str = "", median_step: float | None = None) -> Stretch:
     """Filter, differentiate and evaluate one stretch ``[start, stop)`` of a log once.
 
     The angles are low-passed in one compiled pass, then :func:`._kernels.stretch_motion` takes
@@ -161,7 +162,8 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     pass, written straight into the buffer of the second filter (PARALLEL: all 25 channels).
 
     ``workspace``: buffers reused from the previous log (``tag`` tells this stretch's apart from
-    the log's others); the arrays are then valid until the next log.
+    the log's others); the arrays are then valid until the next log. ``median_step``: the median
+    time step of the stretch when it is already known.
 
     Raises ValueError (naming source and rows) when the stretch is not uniformly sampled or is
     too short for the zero-phase filter.
@@ -170,7 +172,7 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     sl = slice(start, stop)
     t = np.asarray(log.t[sl], dtype=float)
     where = f"{source}: rows {start}..{stop - 1} (t = {t[0]:.6g}..{t[-1]:.6g} s)"
-    dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'")
+    dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'", median=median_step)
     n = t.size
     sos, zi, pad = filter_design(dt, settings.filter)
     if n <= pad:

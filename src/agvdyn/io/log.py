@@ -272,6 +272,7 @@ def read_log(
         lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
         log = Log(path, lazy, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
         object.__setattr__(log, "_block", lazy.block)
+        log.__dict__["sample_time"] = lazy.sample_time  # the checks' median step: not taken twice
         return log
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,

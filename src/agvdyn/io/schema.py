@@ -187,8 +187,8 @@ def _check(
     block = np.empty((n, len(LOG_COLUMNS)))
     for k, col in enumerate(LOG_COLUMNS):
         block[:, k] = _numeric_column(frame[col], source, col, csv_rows)
-    clipped = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
-                           max_sample_time=max_sample_time, csv_rows=csv_rows, clip=clip)
+    clipped, _ = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                              max_sample_time=max_sample_time, csv_rows=csv_rows, clip=clip)
     # One float64 block (no pandas consolidation pass): fast to build and to slice.
     out = pd.DataFrame(block, columns=list(LOG_COLUMNS), copy=False)
     if SEGMENT_COLUMN in frame.columns:
@@ -203,10 +203,12 @@ def _check(
 class LazyFrame:
     """A checked log's columns before they are made a DataFrame (``Log.frame`` makes it on first
     use): ``block`` (N, 11) float64 in :data:`LOG_COLUMNS` order, read only; ``segment_codes``
-    (N,) codes into :data:`SEGMENTS` (-1: no segment), None without a segment column."""
+    (N,) codes into :data:`SEGMENTS` (-1: no segment), None without a segment column;
+    ``sample_time`` the median time step the checks found."""
 
     block: np.ndarray
     segment_codes: np.ndarray | None
+    sample_time: float | None = None
 
     def frame(self) -> pd.DataFrame:
         out = pd.DataFrame(self.block, columns=list(LOG_COLUMNS), copy=False)
@@ -235,11 +237,11 @@ def checked_columns(
     block = np.empty((n, len(LOG_COLUMNS)))
     for k, col in enumerate(LOG_COLUMNS):
         block[:, k] = columns[col]
-    clipped = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
-                           max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=True)
+    clipped, nominal = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                                    max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=True)
     codes = None if segment is None else _segment_codes(segment[0], segment[1], source, block[:, 0], False)
     block.setflags(write=False)
-    return LazyFrame(block, codes), clipped
+    return LazyFrame(block, codes, nominal), clipped
 
 
 def _check_options(max_gap_samples: Any, stop_tolerance: Any, max_sample_time: Any) -> None:
@@ -252,9 +254,10 @@ def _check_options(max_gap_samples: Any, stop_tolerance: Any, max_sample_time: A
 
 
 def _check_block(block: np.ndarray, source: str, *, max_gap_samples: float, stop_tolerance: float,
-                 max_sample_time: float, csv_rows: bool, clip: bool) -> dict[str, int]:
+                 max_sample_time: float, csv_rows: bool, clip: bool) -> tuple[dict[str, int], float]:
     """Checks of the float columns (N, 11) in :data:`LOG_COLUMNS` order; angles within the stop
-    tolerance clipped in place (``clip``). Returns the clipped rows per alpha column."""
+    tolerance clipped in place (``clip``). Returns the clipped rows per alpha column and the
+    nominal (median) time step."""
     if not np.isfinite(block).all():
         for k, col in enumerate(LOG_COLUMNS):
             bad = ~np.isfinite(block[:, k])
@@ -311,7 +314,7 @@ def _check_block(block: np.ndarray, source: str, *, max_gap_samples: float, stop
             clipped[col] = int(np.count_nonzero(mag > STEERING_LIMIT))
             if clip:
                 np.clip(values, -STEERING_LIMIT, STEERING_LIMIT, out=values)
-    return clipped
+    return clipped, nominal
 
 
 def _numeric_column(series: pd.Series, source: str, col: str, csv_rows: bool) -> np.ndarray:
