@@ -203,46 +203,16 @@ def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
     return omega
 
 
-def _block_moments(est: Estimator, data: RegressionData, L: int, residuals: bool = False,
-                   per_log: bool = False, workers: int = 1) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """The weighted Gram ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b`` (nb, p) of non-overlapping
-    blocks of L sample steps; with ``residuals``, the score sums ``A_b^T W r_b`` instead (no
-    cancellation). Per recording (the bootstrap's strata): blocks counted from its first step, empty
-    ones included. ``per_log``: blocks cut at multiples of L of the log's sample index, without rows
-    left out, and a block that a recording shares with the next one of the same log (stretches and
-    the pieces a long log is read in follow each other with increasing steps) summed over both, so
-    a long log read in pieces gets the whole log's blocks; yielded as they complete (memory does
-    not grow with the log). ``workers``: threads summing the recordings' blocks (in order)."""
+def _block_moments(est: Estimator, data: RegressionData, L: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Per recording (the bootstrap's strata), the weighted Gram ``A_b^T W A_b`` (nb, p, p) and
+    ``A_b^T W y_b`` (nb, p) of its non-overlapping blocks of L sample steps, counted from its first
+    step, empty ones included."""
     p = data.A.shape[1]
-
-    def sums(item: tuple[RecordingRows, np.ndarray]) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
-        rec, w = item
-        block = rec.step // L if per_log else (rec.step - rec.step.min()) // L
-        ys = rec.y - rec.A @ est.coef_ if residuals else rec.y
-        return (int(rec.step.min()), int(rec.step.max()), *_block_sums(block, rec.A, w, ys))
-
-    pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
-    last_step = None
-    for first, last, ids, G, b in ordered_map(lambda job: sums(job()), _recording_jobs(est, data), workers,
-                                              "agvdyn-blocks"):
-        new_log = last_step is None or first <= last_step  # steps start again: another log
-        last_step = last
-        if not per_log:  # the bootstrap draws from every block of the recording, empty ones too
-            G_all, b_all = np.zeros((int(ids[-1]) + 1, p, p)), np.zeros((int(ids[-1]) + 1, p))
-            G_all[ids], b_all[ids] = G, b
-            yield G_all, b_all
-            continue
-        if pending is not None:
-            if not new_log and ids[0] == pending[0]:  # the previous recording's last block goes on here
-                G[0] += pending[1]
-                b[0] += pending[2]
-            else:
-                yield pending[1][None], pending[2][None]
-        if ids.size > 1:
-            yield G[:-1], b[:-1]
-        pending = (int(ids[-1]), G[-1], b[-1])
-    if pending is not None:
-        yield pending[1][None], pending[2][None]
+    for rec, w in _recording_weights(est, data):
+        ids, G, b = _block_sums((rec.step - rec.step.min()) // L, rec.A, w, rec.y)
+        G_all, b_all = np.zeros((int(ids[-1]) + 1, p, p)), np.zeros((int(ids[-1]) + 1, p))
+        G_all[ids], b_all[ids] = G, b
+        yield G_all, b_all
 
 
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
@@ -304,23 +274,57 @@ def _largest_leverage(M: np.ndarray, trace: np.ndarray, top: float, batch: int =
 def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
                ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Delete-one-block jackknife (CR3) covariance over blocks of L steps, the degrees of freedom of
-    each variance and the leverage figures (chunks of blocks in ``workers`` threads, summed in order)."""
+    each variance and the leverage figures.
+
+    Blocks are cut at multiples of L of the log's sample index, and a block that a recording shares
+    with the next one of the same log (stretches, and the pieces a long log is read in, follow each
+    other with increasing steps) is summed over both: a long log read in pieces gets the whole
+    log's blocks. Each recording is one job in ``workers`` threads: its score sums ``A_b^T W r_b``
+    (no cancellation) and the changes of its inner blocks; its first and last block, which a
+    neighbour may continue, are completed in order here and their changes taken at the end."""
     B = est.bread_
     lam, V = np.linalg.eigh((B + B.T) / 2)
     half = (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T  # B^(1/2)
     p = B.shape[0]
-    cov = np.zeros((p, p))
-    c_sq = np.zeros(p)  # sum_b d_b^4 per parameter (sum_b d_b^2 is the diagonal of cov)
-    top, above, blocks = 0.0, 0, 0
-    capped: set[int] = set()
-    moments = _block_moments(est, data, L, residuals=True, per_log=True, workers=workers)
-    for dd, d4, n, chunk_top, chunk_above, chunk_capped in ordered_map(
-            lambda GS: _block_changes(half, *GS), moments, workers, "agvdyn-jackknife"):
-        cov += dd
-        c_sq += d4
-        blocks += n
-        top, above = max(top, chunk_top), above + chunk_above
-        capped |= chunk_capped
+    total = [np.zeros((p, p)), np.zeros(p), 0, 0.0, 0, set()]  # sum d d^T, sum d^4, blocks, top, above, capped
+
+    def add(changes: tuple[np.ndarray, np.ndarray, int, float, int, set[int]]) -> None:
+        dd, d4, n, top, above, capped = changes
+        total[0] += dd
+        total[1] += d4
+        total[2] += n
+        total[3], total[4] = max(total[3], top), total[4] + above
+        total[5] |= capped
+
+    def job(item: Callable[[], tuple[RecordingRows, np.ndarray]]):
+        rec, w = item()
+        ids, G, S = _block_sums(rec.step // L, rec.A, w, rec.y - rec.A @ est.coef_)
+        inner = _block_changes(half, G[1:-1], S[1:-1]) if ids.size > 2 else None
+        ends = [0, ids.size - 1] if ids.size > 1 else [0]
+        return int(rec.step.min()), int(rec.step.max()), ids[ends], G[ends], S[ends], inner
+
+    edges: list[tuple[np.ndarray, np.ndarray]] = []  # completed first and last blocks
+    pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
+    last_step = None
+    for first, last, ids, G, S, inner in ordered_map(job, _recording_jobs(est, data), workers, "agvdyn-jackknife"):
+        if inner is not None:
+            add(inner)
+        new_log = last_step is None or first <= last_step  # steps start again: another log
+        last_step = last
+        if pending is not None:
+            if not new_log and ids[0] == pending[0]:  # the previous recording's last block goes on here
+                G[0] += pending[1]
+                S[0] += pending[2]
+            else:
+                edges.append(pending[1:])
+        if ids.size > 1:
+            edges.append((G[0], S[0]))
+        pending = (int(ids[-1]), G[-1], S[-1])
+    if pending is not None:
+        edges.append(pending[1:])
+    if edges:
+        add(_block_changes(half, np.stack([g for g, _ in edges]), np.stack([s for _, s in edges])))
+    cov, c_sq, blocks, top, above, capped = total
     dof = np.where(c_sq > 0, 3.0 * np.diag(cov) ** 2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
     return cov, dof, {"blocks": blocks, "block_steps": L, "max_block_leverage": top,
                       "blocks_above_half_leverage": above, "single_block_columns": sorted(capped)}
