@@ -27,7 +27,8 @@ from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, 
 
 drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__)
 
-__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "SIGNAL_CHANNELS"]
+__all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "copy_rows",
+           "SIGNAL_CHANNELS"]
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
@@ -98,8 +99,24 @@ def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, s
     arg = np.empty((f.shape[0], 6)) if scratch is None else scratch
     _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, arg)
     np.tanh(arg, out=arg)
-    sig[:, 5:9:3] = arg[:, :2]
-    sig[:, 17:21] = arg[:, 2:]
+    _scatter_friction(arg, sig)
+
+
+@numba.njit(cache=True, nogil=True)
+def _scatter_friction(arg, sig):  # pragma: no cover - compiled
+    """The friction entries ``tanh(q_dot / eps)`` (n, 6) into their columns 5, 8, 17-20 of ``sig``."""
+    for j in range(arg.shape[0]):
+        sig[j, 5], sig[j, 8] = arg[j, 0], arg[j, 1]
+        for w in range(4):
+            sig[j, 17 + w] = arg[j, 2 + w]
+
+
+@numba.njit(cache=True, nogil=True)
+def copy_rows(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for 2-D arrays of any strides (numpy's strided copy of a few columns is 2x slower)."""
+    for i in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from agvdyn._zero_phase import filtfilt_in_place
-from agvdyn.identification._kernels import SIGNAL_CHANNELS, recording_breaks, stretch_motion
+from agvdyn.identification._kernels import SIGNAL_CHANNELS, copy_rows, recording_breaks, stretch_motion
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.platform import Geometry
@@ -178,15 +178,15 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     if n <= pad:
         raise ValueError(f"{where}: signal of {n} samples is too short for the zero-phase filter: needs more than {pad}")
     angles = empty(workspace, f"angles{tag}", (n + 2 * pad, 6))
-    angles[pad:pad + n, :2] = log.alpha[sl]
-    angles[pad:pad + n, 2:] = log.beta[sl]
+    copy_rows(angles[pad:pad + n, :2], log.alpha[sl])
+    copy_rows(angles[pad:pad + n, 2:], log.beta[sl])
     f = filtfilt_in_place(sos, zi, angles, pad)
     alpha, trig = empty(workspace, f"alpha{tag}", (n, 2)), empty(workspace, f"trig{tag}", (n, 4))
     slip = empty(workspace, f"slip{tag}", (n, 4))
     q_dot, q_ddot = empty(workspace, f"q_dot{tag}", (n, 9)), empty(workspace, f"q_ddot{tag}", (n, 9))
     both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS))
     middle = both[pad:pad + n]
-    torque = np.ascontiguousarray(log.torque[sl], dtype=float)
+    torque = np.asarray(log.torque[sl], dtype=float)  # a view of the log's columns: the kernel reads it strided
     stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,
                    torque_lead(log, settings), alpha, trig, q_dot, q_ddot, slip, middle,
                    empty(workspace, f"tanh{tag}", (n, 6)))
