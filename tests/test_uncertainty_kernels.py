@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings as hsettings, strategies as st
 
-from agvdyn.identification._uncertainty_kernels import block_changes, block_moments
+from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
 
 
 def _spd_blocks(rng, nb, p, scale):
@@ -58,3 +58,16 @@ def test_block_changes_leave_blocks_above_the_limit_unsolved():
     assert block_changes(half, G, S, 0.5, M, x, trace)
     np.testing.assert_allclose(trace, [0.3, 1.2])
     np.testing.assert_allclose(x, [np.full(p, 1 / 0.9), np.ones(p)])  # (I - 0.1 I)^-1 1; the second as B^1/2 S
+
+
+def test_step_scores_sum_each_steps_scores_and_leave_out_late_steps():
+    rng = np.random.default_rng(5)
+    m, p, T = 400, 5, 150
+    A, y, w, coef = rng.standard_normal((m, p)), rng.standard_normal(m), rng.uniform(0.5, 2, m), rng.standard_normal(p)
+    idx = rng.integers(0, 200, m)  # repeated steps, and steps beyond T
+    out = np.zeros((T, p))
+    step_scores(A, y, w, coef, idx, out)
+    scores = A * (w * (y - A @ coef))[:, None]
+    want = np.zeros((200, p))
+    np.add.at(want, idx, scores)
+    np.testing.assert_allclose(out, want[:T], rtol=1e-12, atol=1e-12)

@@ -1,6 +1,7 @@
 """Compiled kernels of the delete-one-block jackknife (:mod:`.uncertainty`), without the GIL so that
 recordings run in threads:
 
+* :func:`step_scores`: the scores ``a_i w_i r_i`` summed per time step (correlation time, HAC);
 * :func:`block_moments`: each block's weighted Gram ``A_b^T W A_b`` and score sum, row by row;
 * :func:`block_changes`: for every block, its leverage matrix ``B^1/2 G_b B^1/2``, its trace and,
   where the trace bounds every leverage by 0.5, the solution of ``(I - M_b) x = B^1/2 S_b`` by
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_moments", "block_changes"]
+__all__ = ["block_moments", "block_changes", "step_scores"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -96,3 +97,21 @@ def block_changes(half, G, S, limit, M, x, trace):  # pragma: no cover - compile
                 v -= L[m, i] * x[k, m]
             x[k, i] = v / L[i, i]
     return any_high
+
+
+@numba.njit(cache=True, nogil=True)
+def step_scores(A, y, w, coef, idx, out):  # pragma: no cover - compiled
+    """Add the score ``a_i w_i (y_i - a_i coef)`` of every row i of ``A`` (m, p; any strides) to
+    ``out[idx[i]]`` (T, p); rows with ``idx[i] >= T`` are left out."""
+    m, p = A.shape
+    T = out.shape[0]
+    for i in range(m):
+        t = idx[i]
+        if t >= T:
+            continue
+        r = y[i]
+        for c in range(p):
+            r -= A[i, c] * coef[c]
+        r *= w[i]
+        for c in range(p):
+            out[t, c] += A[i, c] * r

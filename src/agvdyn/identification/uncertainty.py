@@ -42,7 +42,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 import numpy as np
 import scipy.fft
 
-from agvdyn.identification._uncertainty_kernels import block_changes, block_moments
+from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
 from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
@@ -118,23 +118,13 @@ def _step_scores(est: Estimator, data: RegressionData, max_steps: int | None = N
 
 
 def _dense_scores(rec: RecordingRows, w: np.ndarray, coef: np.ndarray, max_steps: int | None) -> np.ndarray:
-    """One recording's scores summed per time step (see :func:`_step_scores`)."""
+    """One recording's scores summed per time step (see :func:`_step_scores`), in one compiled pass."""
     idx = rec.step - int(rec.step.min())
-    if max_steps is not None and idx.max() >= max_steps:
-        keep = idx < max_steps
-        idx, A, y, w, group = idx[keep], rec.A[keep], rec.y[keep], w[keep], rec.group[keep]
-    else:
-        A, y, group = rec.A, rec.y, rec.group
-    scores = A * (w * (y - A @ coef))[:, None]
-    T, p = int(idx.max()) + 1, scores.shape[1]
-    groups = [group == g for g in np.unique(group)]
-    if all(np.all(np.diff(idx[sel]) > 0) for sel in groups):  # one row per coordinate and step (our stores)
-        dense = np.zeros((T, p))
-        for sel in groups:
-            dense[idx[sel]] += scores[sel]
-    else:  # repeated steps within a coordinate: summed by one bincount
-        flat = (idx[:, None] * p + np.arange(p)).ravel()
-        dense = np.bincount(flat, weights=scores.ravel(), minlength=T * p).reshape(T, p)
+    T = int(idx.max()) + 1 if max_steps is None else min(int(idx.max()) + 1, max_steps)
+    dense = np.zeros((T, rec.A.shape[1]))
+    step_scores(np.asarray(rec.A, dtype=float), np.ascontiguousarray(rec.y, dtype=float),
+                np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(coef, dtype=float),
+                np.ascontiguousarray(idx, dtype=np.int64), dense)
     return dense
 
 
