@@ -2,6 +2,7 @@
 acceptance of issue 11 on the simulator (planned sequence simulated and identified next to the default)."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -159,6 +160,18 @@ def test_plan_file_round_trip_and_figure(quick_plan, tmp_path):
     np.testing.assert_allclose(traj.pose(), quick_plan.trajectory.pose(), atol=1e-7)
     fig = pl.plan_figure(quick_plan)
     assert len(fig.axes) == 3
+
+
+def test_plan_warns_when_its_prediction_misses_the_bar(quick_plan):
+    ev, ref = quick_plan.evaluation, quick_plan.reference
+    good = dataclasses.replace(quick_plan, evaluation=dataclasses.replace(ev, cond=0.5 * ref.cond,
+                                                                          std={n: 0.9 * v for n, v in ref.std.items()}))
+    assert good.warnings == () and good.to_dict()["warnings"] == []
+    high = dataclasses.replace(good, evaluation=dataclasses.replace(good.evaluation, cond=0.7 * ref.cond))
+    assert len(high.warnings) == 1 and "--seed" in high.warnings[0] and f"{0.7 * ref.cond:.2f}" in high.warnings[0]
+    worse = dataclasses.replace(good, evaluation=dataclasses.replace(
+        good.evaluation, std={**good.evaluation.std, "m_ch": 1.1 * ref.std["m_ch"]}))
+    assert len(worse.warnings) == 1 and "m_ch" in worse.warnings[0]
 
 
 def test_cli_plan_json(tmp_path):

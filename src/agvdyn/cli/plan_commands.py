@@ -100,3 +100,5 @@ def plan(
     console.print(phases)
     console.print(f"planned in {result.elapsed:.1f} s from {len(result.starts)} starts; wrote {written}"
                   + (f" and {figure}" if figure is not None else ""))
+    for warning in result.warnings:
+        console.print(f"[yellow]warning:[/yellow] {warning}", highlight=False)
