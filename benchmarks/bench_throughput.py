@@ -4,6 +4,7 @@ vectorised row-stacked reference and a naive per-sample loop measured in the sam
 ``agvdyn identify`` command as a user meets it (start-up included).
 
     .venv/bin/python benchmarks/bench_throughput.py [--copies 1 25 100] [--experiment 71s|identification]
+                                                    [--repeat 3] [--threads 2] [--log FILE]
 
 * The log (acceptance case, default ``71s``): the identification sequence with one steering period
   and 23 s straight and rotation segments, simulated (seed 1) and cut to its first 71.0 s
@@ -13,7 +14,8 @@ vectorised row-stacked reference and a naive per-sample loop measured in the sam
   and reduced to Gram blocks (what ``agvdyn identify`` and ``agvdyn batch`` run), with
   ``workers=1`` (one core) and ``workers=2`` (two threads); the rate is samples / wall time of
   work (start-up and a warm-up identification excluded), and samples / CPU time of the process
-  (the machine may be shared).
+  (the machine may be shared); ``--repeat`` fresh processes per case, alternated between the
+  thread counts, give the median and the range.
 * ``stacked reference``: every log's equation blocks kept and all rows stacked in memory
   (``fit_blocks(..., stacked=True)``), the previous design; the largest relative difference of
   the ten parameters and four offsets against it is printed.
@@ -94,6 +96,12 @@ def _run_worker(paths: list[Path], mode: str, workers: int = 1) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def _median_run(runs: list[dict]) -> dict:
+    """The run of median wall time, with the largest peak RSS of all."""
+    ordered = sorted(runs, key=lambda r: r["seconds"])
+    return {**ordered[len(ordered) // 2], "peak_mb": max(r["peak_mb"] for r in runs)}
+
+
 def _max_relative_difference(a: list[float], b: list[float]) -> float:
     return max(abs(x / y - 1) if y else abs(x) for x, y in zip(a, b))
 
@@ -151,6 +159,9 @@ def main() -> None:
                         help="the 71 s acceptance log (default) or the whole 117.6 s identification sequence")
     parser.add_argument("--log", type=Path, help="use this log instead of simulating one")
     parser.add_argument("--threads", type=int, default=2, help="workers of the threaded run (default 2)")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="fresh processes per case, alternated between the thread counts (default 3): the "
+                             "median rate is printed with the range (a shared machine's speed varies by ~30 %%)")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--mode", default="normal", help=argparse.SUPPRESS)
     parser.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
@@ -177,12 +188,20 @@ def main() -> None:
         base_rss = None
         for n in args.copies:
             paths = copies[:n]
-            runs = {w: _run_worker(paths, "normal", w) for w in sorted({1, args.threads})}
+            counts = sorted({1, args.threads})
+            repeats: dict[int, list[dict]] = {w: [] for w in counts}
+            for _ in range(max(1, args.repeat)):  # alternated: a slow spell of the host hits both thread counts
+                for w in counts:
+                    repeats[w].append(_run_worker(paths, "normal", w))
+            runs = {w: _median_run(r) for w, r in repeats.items()}
             ref = _run_worker(paths, "stacked") if n <= 25 else None
             for w, fast in runs.items():
+                rates = sorted(r["samples"] / r["seconds"] for r in repeats[w])
                 rate, cpu_rate = fast["samples"] / fast["seconds"], fast["samples"] / fast["cpu"]
-                print(f"{n:4d} logs, {fast['samples']:,} samples, workers={w}: {rate / 1e6:.2f} M samples/s of work "
-                      f"({fast['seconds']:.2f} s, of which the regression stage {fast['regression']:.2f} s; "
+                spread = (f" (range {rates[0] / 1e6:.2f}-{rates[-1] / 1e6:.2f} over {len(rates)} runs)"
+                          if len(rates) > 1 else "")
+                print(f"{n:4d} logs, {fast['samples']:,} samples, workers={w}: {rate / 1e6:.2f} M samples/s of work"
+                      f"{spread} ({fast['seconds']:.2f} s, of which the regression stage {fast['regression']:.2f} s; "
                       f"{cpu_rate / 1e6:.2f} M samples per CPU second), peak RSS {fast['peak_mb']:.0f} MB")
             if ref is not None:
                 diff = max(_max_relative_difference(f["values"], ref["values"]) for f in runs.values())
