@@ -32,7 +32,6 @@ autocorrelation time of the score components (Sokal's window), at least ``min_ba
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -40,10 +39,10 @@ from typing import Any
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
-import scipy.fft
 
 from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
 from agvdyn.identification._threads import ordered_map
+from agvdyn.identification.correlation import correlation_time
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
 
@@ -126,60 +125,6 @@ def _dense_scores(rec: RecordingRows, w: np.ndarray, coef: np.ndarray, max_steps
                 np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(coef, dtype=float),
                 np.ascontiguousarray(idx, dtype=np.int64), dense)
     return dense
-
-
-def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *, window: float = 5.0,
-                     max_steps: int = 1 << 15, workers: int = 1, lengths: Iterable[int] | None = None) -> np.ndarray:
-    """Integrated autocorrelation time (in steps) of each column, pooled over the recordings:
-    ``1 + 2 sum_{l=1}^{M} rho(l)`` with Sokal's window (the smallest M >= window * tau(M)).
-
-    Each recording contributes at most its first ``max_steps`` steps (65 s at 500 Hz), and
-    recordings are pooled until ``4 * max_steps`` steps: the correlation times are tens to hundreds
-    of steps, so this is plenty, and the cost does not grow with the length or number of the logs.
-    ``workers``: threads taking the recordings' autocorrelations. ``series`` may hold callables
-    that return a recording's array when called (in those threads); ``lengths`` then gives each
-    one's number of rows.
-    """
-    def taken() -> Iterator[np.ndarray | Callable[[], np.ndarray]]:
-        pooled = 0
-        for x, n in zip(series, itertools.repeat(None) if lengths is None else lengths):
-            if pooled >= 4 * max_steps:
-                return
-            pooled += min(x.shape[0] if n is None else n, max_steps)
-            yield x
-
-    fft_threads = -1 if workers <= 1 else 1
-    acf = None
-    for c in ordered_map(lambda x: _autocovariance((x() if callable(x) else x)[:max_steps], fft_threads), taken(),
-                         workers, "agvdyn-acf"):
-        acf = c if acf is None else _pad_add(acf, c)
-    p = acf.shape[1]
-    rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
-    tau = np.ones(p)
-    for j in range(p):
-        cum = 1 + 2 * np.cumsum(rho[1:, j])
-        m = np.arange(1, cum.size + 1)
-        ok = np.flatnonzero(m >= window * cum)
-        tau[j] = max(1.0, float(cum[ok[0]] if ok.size else cum[-1]))
-    return tau
-
-
-def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
-    """Unnormalised autocovariance sums (n, p) of the columns of x (n, p), by FFT in single
-    precision (~7 digits of rho are plenty for a window sum)."""
-    x = np.ascontiguousarray(x.T, dtype=np.float32)
-    n = x.shape[1]
-    size = scipy.fft.next_fast_len(2 * n, real=True)
-    f = scipy.fft.rfft(x, size, axis=1, workers=fft_threads)
-    return scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=fft_threads)[:, :n].T.astype(float)
-
-
-def _pad_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    if a.shape[0] < b.shape[0]:
-        a, b = b, a
-    a = a.copy()
-    a[: b.shape[0]] += b
-    return a
 
 
 def _bartlett_meat(series: Iterable[np.ndarray], L: int, p: int) -> np.ndarray:
