@@ -153,8 +153,8 @@ def _block_moments(est: Estimator, data: RegressionData, L: int) -> Iterator[tup
 def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block ids present (sorted) and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b``
-    (nb, p), summed row by row in one compiled pass (:func:`._kernels.block_moments`, without the
-    GIL: recordings in threads)."""
+    (nb, p), summed row by row in one compiled pass without the GIL (recordings in threads;
+    :func:`._uncertainty_kernels.block_moments`)."""
     p = A.shape[1]
     first = int(block.min())
     moments = np.zeros((int(block.max()) - first + 1, p, p + 1))

@@ -47,8 +47,8 @@ _NOT_PLAIN = "\"'&*\t\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
 
 def _entries(text: str) -> dict[str, str] | None:
     """The text of each top-level entry of a plain block mapping (see the module docstring), None
-    for any other text. Regular expressions over the whole text, not a loop over its lines (a
-    simulator's sidecar has ~200 lines and is read with every log)."""
+    for any other text. A regular expression over the whole text finds the entries, not a Python
+    loop over its lines (a simulator's sidecar has ~200 lines and is read with every log)."""
     if any(c in text for c in _NOT_PLAIN):
         return None
     lines = text.split("\n")
