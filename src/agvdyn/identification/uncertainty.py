@@ -221,15 +221,6 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
     lam, V = np.linalg.eigh((B + B.T) / 2)
     half = (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T  # B^(1/2)
     p = B.shape[0]
-    total = [np.zeros((p, p)), np.zeros(p), 0, 0.0, 0, set()]  # sum d d^T, sum d^4, blocks, top, above, capped
-
-    def add(changes: tuple[np.ndarray, np.ndarray, int, float, int, set[int]]) -> None:
-        dd, d4, n, top, above, capped = changes
-        total[0] += dd
-        total[1] += d4
-        total[2] += n
-        total[3], total[4] = max(total[3], top), total[4] + above
-        total[5] |= capped
 
     def job(item: Callable[[], tuple[RecordingRows, np.ndarray]]):
         rec, w = item()
@@ -238,12 +229,13 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
         ends = [0, ids.size - 1] if ids.size > 1 else [0]
         return int(rec.step.min()), int(rec.step.max()), ids[ends], G[ends], S[ends], inner
 
+    changes = []  # per chunk of blocks: sum d d^T, sum d^4, blocks, largest leverage, above 0.5, capped columns
     edges: list[tuple[np.ndarray, np.ndarray]] = []  # completed first and last blocks
     pending: tuple[int, np.ndarray, np.ndarray] | None = None  # per log: the last block, maybe continued
     last_step = None
     for first, last, ids, G, S, inner in ordered_map(job, _recording_jobs(est, data), workers, "agvdyn-jackknife"):
         if inner is not None:
-            add(inner)
+            changes.append(inner)
         new_log = last_step is None or first <= last_step  # steps start again: another log
         last_step = last
         if pending is not None:
@@ -258,8 +250,11 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
     if pending is not None:
         edges.append(pending[1:])
     if edges:
-        add(_block_changes(half, np.stack([g for g, _ in edges]), np.stack([s for _, s in edges])))
-    cov, c_sq, blocks, top, above, capped = total
+        changes.append(_block_changes(half, np.stack([g for g, _ in edges]), np.stack([s for _, s in edges])))
+    dd, d4, counts, tops, above, single = zip(*changes) if changes else ((),) * 6
+    cov, c_sq = sum(dd, np.zeros((p, p))), sum(d4, np.zeros(p))
+    blocks, top, capped = sum(counts), max(tops, default=0.0), set().union(*single)
+    above = sum(above)
     dof = np.where(c_sq > 0, 3.0 * np.diag(cov) ** 2 / np.where(c_sq > 0, c_sq, 1.0), np.inf)  # Satterthwaite
     return cov, dof, {"blocks": blocks, "block_steps": L, "max_block_leverage": top,
                       "blocks_above_half_leverage": above, "single_block_columns": sorted(capped)}
