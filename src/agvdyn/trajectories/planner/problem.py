@@ -184,13 +184,42 @@ class _Problem:
         best = min(cands, key=lambda c_: c_[0])
         return best[0] * self.settings.margin, best[1], best[2], best[3]
 
+    def smooth_scale(self, j: int, c: np.ndarray, T: float) -> tuple[float, np.ndarray]:
+        """The optimiser's scale of the series c in phase j and its gradient in c: ``margin / L`` with
+        ``L`` the ``peak_exponent``-norm over the samples and limits of ``|x| / limit`` (velocity,
+        acceleration, excursion, motor torque), a smooth upper bound of the largest (exact: inf).
+        The exact max has kinks where two peaks are equal, at which L-BFGS-B stalls."""
+        m, B = self.models[j], self.bases[j]
+        p = self.settings.peak_exponent
+        if math.isinf(p):
+            s, kind, i, peak = self.scale(j, c, T)
+            row = (B.Cv[i], B.Ca[i] / T, T * B.Cq[i])[kind] if kind < 3 else \
+                m.K[0, i % 4] * B.Ca[i // 4] / T + m.K[1, i % 4] * B.Cv[i // 4]
+            return s, -s / peak * row
+        v0, a0, q0 = B.Cv @ c, B.Ca @ c / T, T * (B.Cq @ c)
+        y = np.outer(a0, m.K[0]) + np.outer(v0, m.K[1])
+        room = np.maximum(m.torque_limit - np.abs(np.outer(np.sign(v0), m.K[2])), 1e-9)
+        parts = (np.abs(v0) / m.v_limit, np.abs(a0) / m.a_limit, np.abs(q0) / m.q_limit, np.abs(y) / room)
+        top = max(float(u.max()) for u in parts)
+        if top <= 0:
+            return 0.0, np.zeros_like(c)
+        ratios = [(u / top) ** (p - 1) for u in parts]
+        L = top * sum(float(np.sum(r * u / top)) for r, u in zip(ratios, parts)) ** (1 / p)
+        w = [r * (top / L) ** (p - 1) for r in ratios]  # dL/du
+        dL = (B.Cv.T @ (w[0] * np.sign(v0)) / m.v_limit + B.Ca.T @ (w[1] * np.sign(a0)) / (T * m.a_limit)
+              + T * (B.Cq.T @ (w[2] * np.sign(q0))) / m.q_limit)
+        wy = w[3] * np.sign(y) / room
+        dL += B.Ca.T @ (wy @ m.K[0]) / T + B.Cv.T @ (wy @ m.K[1])
+        s = self.settings.margin / L
+        return s, -s / L * dL
+
     def phase_moments(self, j: int, theta: np.ndarray, T: float, want_grad: bool = False):
         """Moment matrices (4, 4) of phase j in units of T_s rows: of the rows kept (validity weights;
         for F and U) and of the rows times their variance factor (for Omega), its penalty time (s;
         see :func:`_row_weights`), and what the gradient needs."""
         m, B = self.models[j], self.bases[j]
         c = B.Pi @ theta
-        s, kind, i_star, peak = self.scale(j, c, T)
+        s, ds_dc = self.smooth_scale(j, c, T)
         v0, a0 = B.Cv @ c, B.Ca @ c / T
         v, a = s * v0, s * a0
         wts = _row_weights(v, a, m.threshold, m.knee, self.settings, self.settings.noise.saturation)
@@ -201,7 +230,7 @@ class _Problem:
         penalty = T / B.n * float(np.sum(wts.pen))
         if not want_grad:
             return M, MO, penalty, None
-        return M, MO, penalty, (c, s, kind, i_star, peak, v0, a0, Z, wts, unit, T / B.n)
+        return M, MO, penalty, (c, s, ds_dc, v0, a0, Z, wts, unit, T / B.n)
 
     def information(self, x: np.ndarray, want_grad: bool = False):
         thetas, eta = self.split(x)
@@ -302,23 +331,13 @@ class _Problem:
 
     def _theta_gradient(self, j: int, GF: np.ndarray, GO: np.ndarray, lam: float, aux, T: float) -> np.ndarray:
         m, B = self.models[j], self.bases[j]
-        c, s, kind, i_star, peak, v0, a0, Z, w, unit, dt_row = aux
+        c, s, ds_dc, v0, a0, Z, w, unit, dt_row = aux
         ZF, ZO = Z @ GF, Z @ GO  # (n, 4)
         qF, qO = np.einsum("ni,ni->n", ZF, Z), np.einsum("ni,ni->n", ZO, Z)
         g_a = unit * (2 * w.wU * ZF[:, 0] + 2 * w.wO * ZO[:, 0] + w.wU_a * qF + w.wO_a * qO) + lam * dt_row * w.pen_a
         g_v = unit * (2 * w.wU * ZF[:, 1] + 2 * w.wO * ZO[:, 1] + w.wU_v * qF + w.wO_v * qO) + lam * dt_row * w.pen_v
-        # v = s Cv c, a = s Ca c / T
+        # v = s Cv c, a = s Ca c / T, and s(c) (smooth_scale)
         dc = s * (B.Cv.T @ g_v + B.Ca.T @ g_a / T)
         dJ_ds = float(g_v @ v0 + g_a @ a0)
-        # s = margin * limit / |peak(c)|: ds/dc = -s / peak * dpeak/dc
-        if kind == 0:
-            row = B.Cv[i_star]
-        elif kind == 1:
-            row = B.Ca[i_star] / T
-        elif kind == 2:
-            row = T * B.Cq[i_star]
-        else:
-            i, k = divmod(i_star, 4)
-            row = m.K[0, k] * B.Ca[i] / T + m.K[1, k] * B.Cv[i]
-        dc += dJ_ds * (-s / peak) * row
+        dc += dJ_ds * ds_dc
         return B.Pi @ dc

@@ -147,6 +147,9 @@ class PlanSettings:
     cond_target, reference_penalty : the ``std`` objective's penalties (see the module docstring),
         ``reference_penalty`` the weight of both.
     margin : share of every limit the plan may use (the rest for tracking and rounding).
+    peak_exponent : the optimiser scales each phase to the ``peak_exponent``-norm of its samples'
+        ``|x| / limit`` (a smooth bound a few per cent above the largest; inf: the largest itself,
+        whose kinks where two peaks are equal stalled L-BFGS-B); the plan is then scaled exactly.
     pause, align_rate, align_acceleration : the alignments at rest between the phases.
     grid : time step of the optimiser's evaluation, s (the result is evaluated at ``T_s``).
     max_iterations : of L-BFGS-B per start.
@@ -178,6 +181,7 @@ class PlanSettings:
     cond_target: float = 6.0
     reference_penalty: float = 20.0
     margin: float = 0.97
+    peak_exponent: float = 64.0
     pause: float = 0.5
     align_rate: float = 0.8
     align_acceleration: float = 2.0
@@ -206,6 +210,8 @@ class PlanSettings:
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number >= 0")
+        if not (isinstance(self.peak_exponent, (int, float)) and self.peak_exponent >= 2):
+            raise TrajectoryError(f"peak_exponent={self.peak_exponent!r}: expected a number >= 2 (or inf)")
         if self.margin > 1:
             raise TrajectoryError(f"margin={self.margin!r}: expected a share of the limits in (0, 1]")
         if self.steering_excursion >= math.pi / 2:
