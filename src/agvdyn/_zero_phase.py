@@ -39,6 +39,32 @@ def _pass(sos, zi, ext, reverse):  # pragma: no cover - compiled
                 row[j] = y
 
 
+@numba.njit(cache=True, nogil=True, fastmath=False)
+def _pass_two(sos, zi, ext, reverse):  # pragma: no cover - compiled
+    """:func:`_pass` for two sections (order 3-4, the default), both applied to a sample before the
+    next channel's: one read and write of each row instead of two (the same operations, 1.7x faster)."""
+    m, c = ext.shape
+    s0, s1, t0, t1 = np.empty(c), np.empty(c), np.empty(c), np.empty(c)
+    first = m - 1 if reverse else 0
+    for j in range(c):
+        x = ext[first, j]
+        s0[j], s1[j] = zi[0, 0] * x, zi[0, 1] * x
+        t0[j], t1[j] = zi[1, 0] * x, zi[1, 1] * x
+    b0, b1, b2, a1, a2 = sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5]
+    c0, c1, c2, e1, e2 = sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5]
+    for k in range(m):
+        i = m - 1 - k if reverse else k
+        for j in range(c):
+            x = ext[i, j]
+            y = b0 * x + s0[j]
+            s0[j] = b1 * x - a1 * y + s1[j]
+            s1[j] = b2 * x - a2 * y
+            w = c0 * y + t0[j]
+            t0[j] = c1 * y - e1 * w + t1[j]
+            t1[j] = c2 * y - e2 * w
+            ext[i, j] = w
+
+
 @numba.njit(cache=True, nogil=True)
 def _odd_extension(ext, n, padlen):  # pragma: no cover - compiled
     """Rows ``[0, padlen)`` and ``[padlen + n, n + 2 padlen)`` of ``ext`` from its middle rows, as
@@ -58,15 +84,6 @@ def _filtfilt_ext(sos, zi, ext, padlen):  # pragma: no cover - compiled
     _pass(sos, zi, ext, True)
 
 
-@numba.njit(cache=True, nogil=True)
-def _filtfilt(sos, zi, x, padlen):  # pragma: no cover - compiled
-    n, c = x.shape
-    ext = np.empty((n + 2 * padlen, c))
-    ext[padlen:padlen + n] = x
-    _filtfilt_ext(sos, zi, ext, padlen)
-    return ext[padlen:padlen + n]
-
-
 def filtfilt_in_place(sos: np.ndarray, zi: np.ndarray, ext: np.ndarray, padlen: int) -> np.ndarray:
     """Zero-phase filtering of the signal in rows ``padlen .. padlen + n`` of ``ext`` (n + 2 padlen,
     channels), in place (the padding rows are written); returns the view of the filtered signal."""
@@ -74,7 +91,13 @@ def filtfilt_in_place(sos: np.ndarray, zi: np.ndarray, ext: np.ndarray, padlen: 
     if ext.ndim != 2 or not ext.flags.c_contiguous or n <= padlen:
         raise ValueError(f"buffer of shape {ext.shape}: expected a C-contiguous (n + 2 padlen, channels) array "
                          f"with n > padlen = {padlen}")
-    _filtfilt_ext(np.ascontiguousarray(sos, dtype=float), np.ascontiguousarray(zi, dtype=float), ext, int(padlen))
+    sos, zi = np.ascontiguousarray(sos, dtype=float), np.ascontiguousarray(zi, dtype=float)
+    if sos.shape[0] == 2:  # called from here: inlined into _filtfilt_ext it compiles to a loop 2x slower
+        _odd_extension(ext, n, int(padlen))
+        _pass_two(sos, zi, ext, False)
+        _pass_two(sos, zi, ext, True)
+    else:
+        _filtfilt_ext(sos, zi, ext, int(padlen))
     return ext[padlen:padlen + n]
 
 
@@ -83,7 +106,9 @@ def sosfiltfilt_columns(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, padlen: 
 
     ``zi`` is ``scipy.signal.sosfilt_zi(sos)``; ``n`` must exceed ``padlen``.
     """
-    x = np.ascontiguousarray(x, dtype=float)
+    x = np.asarray(x, dtype=float)
     if x.ndim != 2 or x.shape[0] <= padlen:
         raise ValueError(f"signal of shape {x.shape}: expected (n, channels) with n > padlen = {padlen}")
-    return _filtfilt(np.ascontiguousarray(sos, dtype=float), np.ascontiguousarray(zi, dtype=float), x, int(padlen))
+    ext = np.empty((x.shape[0] + 2 * padlen, x.shape[1]))
+    ext[padlen:padlen + x.shape[0]] = x
+    return filtfilt_in_place(sos, zi, ext, int(padlen))
