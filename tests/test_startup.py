@@ -63,3 +63,24 @@ def test_package_names_are_still_there():
 
     assert PROTOTYPE is prototype and agvdyn.Geometry is type(prototype)
     assert len(PARAMETER_NAMES) == 11
+
+
+def _arrow_pool_after(code: str, env: dict[str, str]) -> str:
+    import os
+
+    probe = f"{code}\nimport pyarrow\nprint(pyarrow.default_memory_pool().backend_name)"
+    clean = {k: v for k, v in os.environ.items() if not k.startswith(("MALLOC_", "ARROW_DEFAULT_MEMORY_POOL"))}
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True,
+                         env={**clean, **env})
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_kept_freed_memory_serves_pyarrow_from_glibc_unless_told_otherwise():
+    if not sys.platform.startswith("linux"):
+        return
+    keep = "from agvdyn._memory import keep_freed_memory\nassert keep_freed_memory()"
+    assert _arrow_pool_after(keep, {}) == "system"  # before pyarrow loads: by the environment
+    assert _arrow_pool_after("import pyarrow\n" + keep, {}) == "system"  # after: set on the loaded module
+    assert _arrow_pool_after(keep, {"ARROW_DEFAULT_MEMORY_POOL": "mimalloc"}) == "mimalloc"
+    assert _arrow_pool_after("from agvdyn._memory import keep_freed_memory\nassert not keep_freed_memory()",
+                             {"MALLOC_ARENA_MAX": "2"}) != "system"
