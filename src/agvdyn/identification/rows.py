@@ -275,12 +275,13 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         modes[a:b] = mode
     counts.stretches = len(stretches)
     in_mode = [(st, av, modes[st.rows]) for st, av in stretches]
-    speeds = np.concatenate([row_max_abs(st.slip)[(m != NO_MODE) & ~st.edge] for st, _, m in in_mode] or [np.zeros(0)])
+    peaks = [row_max_abs(st.slip) for st, _ in stretches]
+    speeds = np.concatenate([p[(m != NO_MODE) & ~st.edge] for p, (st, _, m) in zip(peaks, in_mode)] or [np.zeros(0)])
     threshold = slip_threshold(speeds, settings)
     slip_guard = settings.slip_guard
     blocks, events = [], []
     for k, (st, av, mode) in enumerate(in_mode):
-        drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)))
+        drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)), peaks[k])
         if core is not None:  # an event belongs to the piece where it starts
             ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
         events += ev

@@ -54,17 +54,18 @@ def slip_threshold(speed: np.ndarray, settings: IdentificationSettings) -> float
     return max(med + settings.slip_spread * mad, float(settings.slip_floor))
 
 
-def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, guard_rows: int
-              ) -> tuple[np.ndarray, list[SlipEvent]]:
+def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, guard_rows: int,
+              peaks: np.ndarray | None = None) -> tuple[np.ndarray, list[SlipEvent]]:
     """Rows to drop (slip rows and ``guard_rows`` either side) and the slip events of one stretch.
 
-    Slip rows closer than ``2 * guard_rows`` are one event.
+    Slip rows closer than ``2 * guard_rows`` are one event. ``peaks``: ``row_max_abs(slip)`` when
+    already known.
     """
     n = t.size
-    over = slip > threshold
-    hit = row_max_abs(slip) > threshold
+    hit = (row_max_abs(slip) if peaks is None else peaks) > threshold
     if not hit.any():
         return np.zeros(n, dtype=bool), []
+    over = slip > threshold
     cs = np.concatenate([[0], np.cumsum(hit)])
     lo = np.clip(np.arange(n) - guard_rows, 0, n)
     hi = np.clip(np.arange(n) + guard_rows + 1, 0, n)
