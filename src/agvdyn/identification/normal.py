@@ -18,15 +18,13 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg.lapack
 
 from agvdyn.dynamics import N_P
 from agvdyn.identification._kernels import kept_rows
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.store import RecordingRows, RowStore
 from agvdyn.identification.workspace import Workspace, empty
-
-#: Rows per QR of a tall-skinny factorization.
-_QR_ROWS = 2048
 
 __all__ = ["RowIndex", "RowStore", "RecordingRows", "RowStatistics", "RegressionData", "LogReduction", "row_statistics",
            "reduce_blocks", "merge_reduction", "regression_data", "stacked_regression_data", "triangular_rows"]
@@ -63,7 +61,7 @@ class RowStatistics:
     _pending: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict, repr=False)
 
     def add(self, key: tuple[str, str], rows: np.ndarray, count: int | None = None) -> None:
-        """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (tall-skinny QR over the
+        """Merge rows ``[A | y]`` (m, width + 1) into the factor of ``key`` (QR over the
         columns that are not zero in the rows or the factor: a key's rows leave most columns zero).
         ``count``: the rows they stand for when they are themselves a factor (default m); factors
         are merged a batch at a time (one QR per :data:`_MERGE_BATCH` logs instead of one per log)."""
@@ -110,19 +108,23 @@ class RowStatistics:
 
 def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None,
                     used: np.ndarray | None = None) -> np.ndarray:
-    """Triangular factor (size, size) of ``rows`` (m, size) stacked on ``old`` (a factor): QR in
-    chunks of rows over the columns that are not zero anywhere (the others stay zero; ``used``:
-    the rows' columns not zero, when known)."""
+    """Triangular factor (size, size) of ``rows`` (m, size) stacked on ``old`` (a factor): one
+    Householder QR (LAPACK ``dgeqrf``) over the columns that are not zero anywhere (the others stay
+    zero; ``used``: the rows' columns not zero, when known)."""
     used = np.abs(rows).max(axis=0) > 0 if used is None else used.copy()
     if old is not None:
         used |= np.abs(old).max(axis=0) > 0
     cols = np.flatnonzero(used)
-    parts = [np.linalg.qr(rows[i:i + _QR_ROWS][:, cols], mode="r") for i in range(0, rows.shape[0], _QR_ROWS)]
-    if old is not None:
-        parts.append(old[:, cols])
-    r = np.linalg.qr(np.vstack(parts), mode="r") if len(parts) > 1 else parts[0]
+    # gathered column by column into a Fortran-ordered copy that LAPACK overwrites (no second copy)
+    a = rows.T[cols].T if old is None else np.vstack([rows[:, cols], old[:, cols]]).T.copy().T
     R = np.zeros((size, size))
-    R[np.ix_(np.arange(r.shape[0]), cols)] = r
+    if a.shape[0] == 0 or cols.size == 0:
+        return R
+    qr, _, _, info = scipy.linalg.lapack.dgeqrf(a, overwrite_a=True)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeqrf failed (info={info}) on a ({a.shape[0]}, {a.shape[1]}) block of rows")
+    k = min(a.shape)
+    R[:k, cols] = np.triu(qr[:k])
     return R
 
 
