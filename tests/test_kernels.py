@@ -161,3 +161,13 @@ def test_sincos_of_a_steering_angle_is_exact_on_most_of_a_grid():
     _sincos_of(x, out)
     assert np.mean(out[:, 0] == np.sin(x)) > 0.9 and np.mean(out[:, 1] == np.cos(x)) > 0.9
     assert np.max(np.abs(out[:, 1] - np.cos(x)) / np.spacing(np.abs(np.cos(x)))) <= 1.0
+
+
+@given(hst.lists(hst.floats(0.0, 10.0), min_size=1, max_size=60))
+def test_median_and_mad_equal_numpy(values):
+    from agvdyn.identification._kernels import median_and_mad
+
+    x = np.array(values)
+    med, mad = median_and_mad(x)
+    assert med == np.median(x)
+    assert mad == np.median(np.abs(x - np.median(x)))

@@ -28,7 +28,7 @@ from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, 
 drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__)
 
 __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "copy_rows",
-           "SIGNAL_CHANNELS"]
+           "median_and_mad", "SIGNAL_CHANNELS"]
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
@@ -371,3 +371,14 @@ def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step
             count += 1
     return count
 
+
+
+@numba.njit(cache=True, nogil=True)
+def median_and_mad(x):  # pragma: no cover - compiled
+    """``(median(x), median(|x - median(x)|))`` of a 1-D array, as numpy's, without the GIL (two
+    medians of a log's slip speeds held it ~1 ms per log while another thread waited)."""
+    m = np.median(x)
+    dev = np.empty_like(x)
+    for i in range(x.size):
+        dev[i] = abs(x[i] - m)
+    return m, np.median(dev)

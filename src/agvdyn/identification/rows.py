@@ -34,7 +34,7 @@ from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering
 from agvdyn.kinematics.models import _constant_model
 from agvdyn.platform import Geometry
-from agvdyn.signals import row_max_abs, runs
+from agvdyn.signals import row_max_abs
 
 __all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations", "labels_present"]
 
@@ -225,19 +225,23 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
                                usable, mine, guard, geometry.l, geometry.b, geometry.a, geometry.r,
                                max_virtual_angle(geometry), geometry.i_G, Y, tau, s_dot, keep, offsets, runs_found)
     blocks = []
-    base = st.rows.start
+    sample = np.arange(st.rows.start, st.rows.start + n)
+    codes = None if labels is None else labels.codes[st.rows]
+    changes = None if codes is None else np.flatnonzero(codes[1:] != codes[:-1]) + 1  # label changes, once
+    constant: dict[Mode, np.ndarray] = {}
     for a, b in runs_found[:count].tolist():
         m = Mode(int(mode[a]))
         k = m.dof
-        offs = offsets[a:b, :k] if m is Mode.CAR_LIKE else np.broadcast_to(tables.offsets[m, :k], (b - a, k, 4))
-        block = EquationBlock(st.source, f"mode {m.label}", m, st.t[a:b], Y[a:b, :k], tau[a:b, :k], s_dot[a:b, :k],
-                              keep[a:b, :k], offs, recording, np.arange(base + a, base + b))
-        if labels is None:
-            blocks.append(block)
-            continue
-        codes = labels.codes[st.rows][a:b]
-        for c, d in runs(codes):
-            blocks.append(block.rows(slice(c, d), labels.names[codes[c]] or f"mode {m.label}"))
+        if m is Mode.CAR_LIKE:
+            offs = offsets[:, :k]
+        else:
+            offs = constant.setdefault(m, np.broadcast_to(tables.offsets[m, :k], (n, k, 4)))
+        cuts = [a, b] if changes is None else [a, *changes[np.searchsorted(changes, a, "right"):
+                                                            np.searchsorted(changes, b, "left")].tolist(), b]
+        for c, d in zip(cuts, cuts[1:]):  # a run split where the label changes (block names only)
+            name = f"mode {m.label}" if codes is None else labels.names[codes[c]] or f"mode {m.label}"
+            blocks.append(EquationBlock(st.source, name, m, st.t[c:d], Y[c:d, :k], tau[c:d, :k], s_dot[c:d, :k],
+                                        keep[c:d, :k], offs[c:d], recording, sample[c:d]))
     return blocks
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.platform import WHEELS
+from agvdyn.identification._kernels import median_and_mad
 from agvdyn.signals import row_max_abs, runs
 
 __all__ = ["SlipEvent", "slip_threshold", "slip_rows"]
@@ -49,9 +50,9 @@ def slip_threshold(speed: np.ndarray, settings: IdentificationSettings) -> float
         return float(settings.slip_threshold)
     if speed.size == 0:
         return float(settings.slip_floor)
-    med = float(np.median(speed))
-    mad = MAD_SCALE * float(np.median(np.abs(speed - med)))
-    return max(med + settings.slip_spread * mad, float(settings.slip_floor))
+    med, mad = median_and_mad(np.ascontiguousarray(speed, dtype=float))
+    mad = MAD_SCALE * float(mad)
+    return max(float(med) + settings.slip_spread * mad, float(settings.slip_floor))
 
 
 def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, guard_rows: int,

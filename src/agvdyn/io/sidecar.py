@@ -72,12 +72,15 @@ class LazySidecar:
 
     def __init__(self, text: str, entries: dict[str, str], where: Path | str) -> None:
         self.text, self.where, self._entries = text, where, entries
+        self._scalars: dict[str, Any] = {}  # entries already parsed that hold a number, string or bool
 
     def parse(self) -> dict[str, Any]:
         return parse_sidecar(self.text, self.where)
 
     def get(self, key: str, default: Any = None) -> Any:
         """The value of the top-level entry ``key`` (``default`` without it), parsing that entry only."""
+        if key in self._scalars:  # asked once per stretch (torque_lead): parsed once
+            return self._scalars[key]
         chunk = self._entries.get(key)
         if chunk is None:
             return default
@@ -87,6 +90,8 @@ class LazySidecar:
             return self.parse().get(key, default)
         if not isinstance(data, dict) or list(data) != [key]:  # e.g. a key YAML reads as a bool
             return self.parse().get(key, default)
+        if data[key] is None or isinstance(data[key], (bool, int, float, str)):  # immutable: safe to share
+            self._scalars[key] = data[key]
         return data[key]
 
 
