@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from agvdyn.io.log import STOP_TOLERANCE, Log, LogError, _log_suffix, read_sidecar
+from agvdyn.io.log import STOP_TOLERANCE, Log, LogError, _log_suffix, parquet_metadata, read_sidecar
 
 __all__ = ["CHUNK_ROWS", "CHUNK_OVERLAP", "log_rows_count", "is_long_log", "log_pieces"]
 
@@ -25,10 +25,8 @@ def log_rows_count(path: str | os.PathLike) -> int | None:
     path = Path(path)
     if _log_suffix(path) != ".parquet":
         return None
-    import pyarrow.parquet as pq
-
     try:
-        return int(pq.ParquetFile(path).metadata.num_rows)
+        return int(parquet_metadata(path).num_rows)
     except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
         raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
 

@@ -7,7 +7,7 @@ holds facts about the run (platform, true parameters of a simulation, conversion
 
 import os
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -280,6 +280,21 @@ def read_log(
     return Log(path, checked, read_sidecar(path), clipped)
 
 
+def parquet_metadata(path: str | os.PathLike) -> Any:
+    """The footer (``pyarrow.parquet.FileMetaData``) of a Parquet file, read once per file version
+    (path, size and modification time): the row count asked before a log is read and the read
+    itself share it."""
+    stat = os.stat(path)
+    return _footer(str(path), stat.st_size, stat.st_mtime_ns)
+
+
+@lru_cache(maxsize=8)
+def _footer(path: str, size: int, mtime_ns: int) -> Any:
+    import pyarrow.parquet as pq
+
+    return pq.read_metadata(path)
+
+
 def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
     """The columns of a Parquet file that holds exactly our schema (float64 columns without nulls,
     optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
@@ -289,7 +304,7 @@ def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[
     import pyarrow.parquet as pq
 
     try:
-        table = pq.ParquetFile(path).read(use_pandas_metadata=False)
+        table = pq.ParquetFile(path, metadata=parquet_metadata(path)).read(use_pandas_metadata=False)
     except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
         raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
     names = table.column_names
