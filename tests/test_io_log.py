@@ -324,3 +324,13 @@ def test_a_step_putting_the_filter_above_nyquist_is_refused():
         Log.from_frame(frame)
     Log.from_frame(make_frame(n=50, dt=0.07, segments=False))
     check_frame(frame, max_sample_time=0.2)  # settable
+
+
+def test_a_rewritten_parquet_log_is_read_anew_not_from_the_kept_footer(tmp_path):
+    from agvdyn.io.chunks import log_rows_count
+
+    path = write_log(tmp_path / "a.parquet", make_frame(n=300))
+    assert log_rows_count(path) == 300 and read_log(path).t.size == 300  # footer read once, kept
+    write_log(path, make_frame(n=120))  # another size: another file version
+    assert log_rows_count(path) == 120
+    assert read_log(path).t.size == 120

@@ -35,7 +35,8 @@ def default_workers() -> int:
 
 def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, name: str = "agvdyn") -> Iterator[R]:
     """``map(fn, items)`` in up to ``workers`` threads, results in the items' order, at most
-    ``workers + 1`` items taken ahead of the one yielded (one thread: plain ``map``)."""
+    ``2 workers`` items taken ahead of the one yielded (one thread: plain ``map``): a thread that
+    finished early starts the next item instead of waiting for a slower neighbour's result."""
     if workers <= 1:
         yield from map(fn, items)
         return
@@ -44,7 +45,7 @@ def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, name: st
         pending: deque = deque()
         for item in items:
             pending.append(pool.submit(fn, item))
-            if len(pending) > workers:
+            if len(pending) > 2 * workers:
                 yield pending.popleft().result()
         while pending:
             yield pending.popleft().result()

@@ -6,8 +6,9 @@ holds facts about the run (platform, true parameters of a simulation, conversion
 """
 
 import os
+import threading
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -284,15 +285,28 @@ def parquet_metadata(path: str | os.PathLike) -> Any:
     """The footer (``pyarrow.parquet.FileMetaData``) of a Parquet file, read once per file version
     (path, size and modification time): the row count asked before a log is read and the read
     itself share it."""
-    stat = os.stat(path)
-    return _footer(str(path), stat.st_size, stat.st_mtime_ns)
+    return _parquet_file(path).metadata
 
 
-@lru_cache(maxsize=8)
-def _footer(path: str, size: int, mtime_ns: int) -> Any:
+_FOOTERS: dict[tuple[str, int, int], Any] = {}
+_FOOTERS_LOCK = threading.Lock()
+
+
+def _parquet_file(path: str | os.PathLike) -> Any:
+    """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any."""
     import pyarrow.parquet as pq
 
-    return pq.read_metadata(path)
+    stat = os.stat(path)
+    key = (str(path), stat.st_size, stat.st_mtime_ns)
+    with _FOOTERS_LOCK:
+        footer = _FOOTERS.get(key)
+    file = pq.ParquetFile(path, metadata=footer)
+    if footer is None:
+        with _FOOTERS_LOCK:  # the few most recent files: a log is asked for twice in a row
+            _FOOTERS[key] = file.metadata
+            while len(_FOOTERS) > 8:
+                _FOOTERS.pop(next(iter(_FOOTERS)))
+    return file
 
 
 def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
@@ -301,10 +315,9 @@ def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[
     None for any other file (read then through pandas, with its messages)."""
     import pyarrow as pa
     import pyarrow.compute as pc
-    import pyarrow.parquet as pq
 
     try:
-        table = pq.ParquetFile(path, metadata=parquet_metadata(path)).read(use_pandas_metadata=False)
+        table = _parquet_file(path).read(use_pandas_metadata=False)
     except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
         raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
     names = table.column_names
