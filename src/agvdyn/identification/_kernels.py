@@ -92,12 +92,12 @@ def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no 
         slip[j, w] = np.sqrt(lat * lat + lon * lon)
 
 
-def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, scratch=None) -> None:
+def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, scratch=None) -> None:
     """See :func:`_stretch_motion`; the six friction entries ``tanh(q_dot / eps)`` are taken after
     the sweep by numpy's vectorised tanh on one contiguous array (``scratch`` (n, 6), optional): a
     scalar libm tanh per entry had been a third of the sweep."""
     arg = np.empty((f.shape[0], 6)) if scratch is None else scratch
-    _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, arg)
+    _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, arg)
     np.tanh(arg, out=arg)
     _scatter_friction(arg, sig)
 
@@ -120,10 +120,11 @@ def copy_rows(dst, src):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, slip, sig, arg):  # pragma: no cover
+def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, arg):  # pragma: no cover
     """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr). Writes
     ``alpha`` (n, 2) clipped to the stops, ``trig`` (n, 4) their (sin, cos) left and right,
-    ``qd``, ``qdd`` (n, 9) joint velocities and accelerations (chassis by odometry, eq. 3),
+    ``qd`` (n, 9) joint velocities (chassis by odometry, eq. 3; their derivatives, the
+    accelerations, enter the signals and are not kept),
     ``slip`` (n, 4) slip speed per contact point (m/s), ``sig`` (n, 25) the entries of Theta
     (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and the torques ``(1 - lead) m[k] + lead m[k-1]``.
 
@@ -136,6 +137,7 @@ def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, 
     per_eps = 1.0 / eps
     A = np.empty((8, 3))
     rhs = np.empty(8)
+    qdd = np.empty(9)
     for k in range(n + 2):
         if k < n:
             j = k
@@ -149,16 +151,16 @@ def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, qdd, 
         if j < 0:
             continue
         for c in range(9):
-            qdd[j, c] = _derivative(qd, j, c, dt, half_rate)
-        sig[j, 0] = qdd[j, 0] - qd[j, 1] * qd[j, 2]
-        sig[j, 1] = qdd[j, 1] + qd[j, 0] * qd[j, 2]
-        sig[j, 2] = qdd[j, 2]
+            qdd[c] = _derivative(qd, j, c, dt, half_rate)
+        sig[j, 0] = qdd[0] - qd[j, 1] * qd[j, 2]
+        sig[j, 1] = qdd[1] + qd[j, 0] * qd[j, 2]
+        sig[j, 2] = qdd[2]
         for c in range(2):
-            sig[j, 3 + 3 * c] = qdd[j, 3 + c]
+            sig[j, 3 + 3 * c] = qdd[3 + c]
             sig[j, 4 + 3 * c] = qd[j, 3 + c]
             arg[j, c] = qd[j, 3 + c] * per_eps  # tanh taken by stretch_motion
         for w in range(4):
-            sig[j, 9 + w] = qdd[j, 5 + w]
+            sig[j, 9 + w] = qdd[5 + w]
             sig[j, 13 + w] = qd[j, 5 + w]
             arg[j, 2 + w] = qd[j, 5 + w] * per_eps
         for w in range(4):

@@ -36,9 +36,9 @@ class Stretch:
     """One continuous stretch of a log, filtered once; arrays have the stretch's rows first.
 
     ``rows``: the rows of the log. ``alpha`` (n, 2) filtered steering angles (clipped to the
-    stops); ``q_dot``, ``q_ddot`` (n, 9) joint velocities and accelerations, the chassis ones by
-    odometry (eq. 3), the others derivatives of the filtered angles (views: ``alpha_dot``,
-    ``beta_dot``, ``chassis_dot``, ...); ``slip`` (n, 4) slip speed per wheel (m/s);
+    stops); ``q_dot``, ``q_ddot`` (n, 9) joint velocities and accelerations (the latter formed
+    on demand), the chassis ones by odometry (eq. 3), the others derivatives of the filtered
+    angles (views: ``alpha_dot``, ``beta_dot``, ``chassis_dot``, ...); ``slip`` (n, 4) slip speed per wheel (m/s);
     ``signals`` (n, 21) entries of Theta (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and
     ``torque`` (n, 4) motor torques, both filtered alike in PARALLEL filtering; ``edge`` (n,)
     rows within the filter's transient of either end; ``trig`` (n, 4) sin and cos of the left and
@@ -51,7 +51,6 @@ class Stretch:
     dt: float
     alpha: np.ndarray
     q_dot: np.ndarray
-    q_ddot: np.ndarray
     slip: np.ndarray
     signals: np.ndarray
     torque: np.ndarray
@@ -73,6 +72,12 @@ class Stretch:
     @property
     def beta_dot(self) -> np.ndarray:
         return self.q_dot[:, 5:]
+
+    @property
+    def q_ddot(self) -> np.ndarray:
+        """Joint accelerations (n, 9): derivatives of ``q_dot`` as in the signals (``np.gradient``,
+        second order at the ends), formed when asked for (the row pipeline does not keep them)."""
+        return np.gradient(self.q_dot, self.dt, axis=0, edge_order=2)
 
     @property
     def chassis_ddot(self) -> np.ndarray:
@@ -183,12 +188,12 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     f = filtfilt_in_place(sos, zi, angles, pad)
     alpha, trig = empty(workspace, f"alpha{tag}", (n, 2)), empty(workspace, f"trig{tag}", (n, 4))
     slip = empty(workspace, f"slip{tag}", (n, 4))
-    q_dot, q_ddot = empty(workspace, f"q_dot{tag}", (n, 9)), empty(workspace, f"q_ddot{tag}", (n, 9))
+    q_dot = empty(workspace, f"q_dot{tag}", (n, 9))
     both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS))
     middle = both[pad:pad + n]
     torque = np.asarray(log.torque[sl], dtype=float)  # a view of the log's columns: the kernel reads it strided
     stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,
-                   torque_lead(log, settings), alpha, trig, q_dot, q_ddot, slip, middle,
+                   torque_lead(log, settings), alpha, trig, q_dot, slip, middle,
                    empty(workspace, f"tanh{tag}", (n, 6)))
     if settings.filtering is Filtering.PARALLEL:
         filtfilt_in_place(sos, zi, both, pad)
@@ -198,4 +203,4 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     edge = np.zeros(n, dtype=bool)
     edge[:k] = True
     edge[max(n - k, 0):] = True
-    return Stretch(source, sl, t, dt, alpha, q_dot, q_ddot, slip, middle[:, :21], middle[:, 21:], edge, trig)
+    return Stretch(source, sl, t, dt, alpha, q_dot, slip, middle[:, :21], middle[:, 21:], edge, trig)
