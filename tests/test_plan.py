@@ -34,8 +34,8 @@ def _log(result) -> Log:
     return Log.from_frame(result.log_frame(), sidecar=result.sidecar())
 
 
-def _problem(objective: str, seed: int = 1, periods=None) -> tuple[pl._Problem, np.ndarray]:
-    settings = pl.PlanSettings(objective=objective)
+def _problem(objective: str, seed: int = 1, periods=None, peak_exponent=math.inf) -> tuple[pl._Problem, np.ndarray]:
+    settings = pl.PlanSettings(objective=objective, peak_exponent=peak_exponent)
     models = pl._phase_models(PROTOTYPE, P, FloorSpace(5.2, 1.6), Limits(), settings)
     rng = np.random.default_rng(seed)
     harmonics = [6, 7, 5, 6]
@@ -45,11 +45,11 @@ def _problem(objective: str, seed: int = 1, periods=None) -> tuple[pl._Problem, 
     return problem, x
 
 
-@pytest.mark.parametrize("objective", pl.OBJECTIVES)
-def test_objective_gradient_matches_finite_differences(objective):
+@pytest.mark.parametrize("objective,peak_exponent", [(o, math.inf) for o in pl.OBJECTIVES] + [("std", 64.0)])
+def test_objective_gradient_matches_finite_differences(objective, peak_exponent):
     """The analytic gradient (moments, Fourier basis, scaling to the limits, durations) against central
     differences of the objective; a step may cross a kink of the scaling (two equal peaks): median."""
-    problem, x = _problem(objective)
+    problem, x = _problem(objective, peak_exponent=peak_exponent)
     J, g = problem(x)
     assert J == pytest.approx(problem.objective(x))
     h = 1e-6
@@ -68,6 +68,18 @@ def test_objective_gradient_with_repeated_periods():
     assert np.median(err) < 1e-5 and np.quantile(err, 0.9) < 1e-3
     with pytest.raises(TrajectoryError, match="periods"):
         pl.PlanSettings(periods=(1, 1, 0, 1))
+
+
+def test_smooth_peak_is_a_close_upper_bound():
+    """With ``peak_exponent`` 64 the optimiser's scale is at most the exact one and within 8 % of it (the
+    p-norm over the samples bounds their largest from above)."""
+    problem, x = _problem("std", peak_exponent=64.0)
+    thetas, eta = problem.split(x)
+    T = problem.durations(eta)
+    for j in range(4):
+        c = problem.bases[j].Pi @ thetas[j]
+        exact, smooth = problem.scale(j, c, T[j])[0], problem.smooth_scale(j, c, T[j])[0]
+        assert 0.92 * exact <= smooth <= exact * (1 + 1e-12)
 
 
 def test_parameter_margins():

@@ -154,11 +154,11 @@ class Plan:
 
 
 def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:
-    problem_args, x0, k = args
+    problem_args, x0, k, iterations = args
     problem = _Problem(*problem_args)
     t0 = time.perf_counter()
     res = scipy.optimize.minimize(problem, x0, jac=True, method="L-BFGS-B",
-                                  options={"maxiter": problem.settings.max_iterations, "maxcor": 20})
+                                  options={"maxiter": iterations, "maxcor": 20})
     msg = str(res.message)
     F, _, U, T, _, band = problem.information(res.x)
     info = {"start": k, "objective": float(res.fun), "iterations": int(res.nit),
@@ -166,6 +166,30 @@ def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:
             "cond_smooth": float(np.exp(_log_cond(U)[0])), "penalty_share": float(band), "message": msg,
             "seconds": time.perf_counter() - t0}
     return float(res.fun), res.x, [b.H for b in problem.bases], info
+
+
+def _run_starts(jobs: list, settings: PlanSettings) -> list[tuple[float, np.ndarray, list[int], dict[str, Any]]]:
+    """Every start for ``explore_iterations`` of L-BFGS-B, then the ``refine`` best ones on to
+    ``max_iterations`` in all (the starts' objectives after the first iterations rank them well
+    enough, and the iterations go where they pay)."""
+    first = min(settings.explore_iterations, settings.max_iterations)
+    rest = settings.max_iterations - first
+    workers = settings.workers or min(2, os.cpu_count() or 1)
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs))) if workers > 1 and len(jobs) > 1 else None
+    try:
+        mapper = pool.map if pool is not None else map
+        results = list(mapper(_worker, [(*job, first) for job in jobs]))
+        order = sorted(range(len(results)), key=lambda i: results[i][0])[:settings.refine] if rest > 0 else []
+        again = list(mapper(_worker, [(jobs[i][0], results[i][1], jobs[i][2], rest) for i in order]))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    for i, (fun, x, harmonics, info) in zip(order, again):
+        before = results[i][3]
+        info.update(iterations=before["iterations"] + info["iterations"], seconds=before["seconds"] + info["seconds"],
+                    explore_objective=before["objective"])
+        results[i] = (fun, x, harmonics, info)
+    return results
 
 
 def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1.6), duration: float | None = None,
@@ -238,12 +262,7 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
         problem_args = (models, harmonics, available, settings, params.to_vector(), F0, U0, ref_log, dt, grid_points, O0,
                         periods)
         jobs.append((problem_args, x0, k))
-    workers = settings.workers or min(2, os.cpu_count() or 1)
-    if workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
-            results = list(pool.map(_worker, jobs))
-    else:
-        results = [_worker(job) for job in jobs]
+    results = _run_starts(jobs, settings)
     best = min(range(len(results)), key=lambda i: results[i][0])
     fun, x, harmonics, _ = results[best]
     problem = _Problem(*jobs[best][0])
