@@ -317,7 +317,8 @@ def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[
     import pyarrow.compute as pc
 
     try:
-        table = _parquet_file(path).read(use_pandas_metadata=False)
+        # no pyarrow threads: logs are read in the identification's own threads (nested pools oversubscribed the cores)
+        table = _parquet_file(path).read(use_pandas_metadata=False, use_threads=False)
     except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
         raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
     names = table.column_names
