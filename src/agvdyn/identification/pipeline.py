@@ -185,7 +185,7 @@ def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: Identificati
                   order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
     """``(log, core, rows, reduction)`` of every log of the stream, in order: read, filtered, rows
     classified and reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a time
-    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``2 workers`` logs ahead.
+    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs ahead.
     ``reuse``: the blocks are not wanted (``rows.blocks`` empty), each thread reuses its buffers."""
 
     local = threading.local()
