@@ -47,6 +47,15 @@ def test_block_moments_are_the_weighted_grams_of_each_block():
         Ay = np.column_stack([A[sel], y[sel]])
         np.testing.assert_allclose(out[j], (A[sel] * w[sel, None]).T @ Ay, rtol=1e-12, atol=1e-12)
         assert count[j] == sel.sum()
+    coef = rng.standard_normal(p)  # the residual y - A coef in place of y: the score sums
+    wide = np.column_stack([A, rng.standard_normal(m)])  # A as a strided view of wider stored rows
+    res, res_count = np.zeros((8, p, p + 1)), np.zeros(8, dtype=np.int64)
+    block_moments(block, wide[:, :p], w, y, 3, res, res_count, coef)
+    r = y - A @ coef
+    for j in range(8):
+        sel = block == j + 3
+        np.testing.assert_allclose(res[j, :, :p], out[j, :, :p], rtol=0, atol=0)
+        np.testing.assert_allclose(res[j, :, p], (A[sel] * w[sel, None]).T @ r[sel], rtol=1e-12, atol=1e-12)
 
 
 def test_block_changes_leave_blocks_above_the_limit_unsolved():

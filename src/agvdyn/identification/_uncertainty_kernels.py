@@ -16,10 +16,12 @@ __all__ = ["block_moments", "block_changes", "step_scores"]
 
 
 @numba.njit(cache=True, nogil=True)
-def block_moments(block, A, w, y, first, out, count):  # pragma: no cover - compiled
+def block_moments(block, A, w, y, first, out, count, coef=None):  # pragma: no cover - compiled
     """Add ``w_i a_i^T [a_i | y_i]`` of every row i of ``A`` (m, p; a view of any strides) to
     ``out[block[i] - first]`` (nb, p, p + 1) and count the rows of each block in ``count`` (nb,);
-    zero entries of a row are skipped (a coordinate's rows use a few of the columns)."""
+    zero entries of a row are skipped (a coordinate's rows use a few of the columns). With
+    ``coef`` (p,), the residual ``y_i - a_i coef`` takes the place of ``y_i`` (the score sums),
+    formed from the row already read (no pass of its own, no copy of a strided A)."""
     m, p = A.shape
     row = np.empty(p + 1)
     for i in range(m):
@@ -27,7 +29,13 @@ def block_moments(block, A, w, y, first, out, count):  # pragma: no cover - comp
         count[j] += 1
         for b in range(p):
             row[b] = A[i, b]
-        row[p] = y[i]
+        if coef is None:
+            row[p] = y[i]
+        else:
+            fit = 0.0
+            for b in range(p):
+                fit += row[b] * coef[b]
+            row[p] = y[i] - fit
         for a in range(p):
             wa = w[i] * row[a]
             if wa == 0.0:

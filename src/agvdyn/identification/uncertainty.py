@@ -150,17 +150,18 @@ def _block_moments(est: Estimator, data: RegressionData, L: int) -> Iterator[tup
         yield G_all, b_all
 
 
-def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray
+def _block_sums(block: np.ndarray, A: np.ndarray, w: np.ndarray, y: np.ndarray, coef: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block ids present (sorted) and, per block, ``A_b^T W A_b`` (nb, p, p) and ``A_b^T W y_b``
-    (nb, p), summed row by row in one compiled pass without the GIL (recordings in threads;
-    :func:`._uncertainty_kernels.block_moments`)."""
+    (nb, p) (``y - A coef`` in place of y with ``coef``: the score sums), summed row by row in one
+    compiled pass without the GIL (recordings in threads; :func:`._uncertainty_kernels.block_moments`)."""
     p = A.shape[1]
     first = int(block.min())
     moments = np.zeros((int(block.max()) - first + 1, p, p + 1))
     count = np.zeros(moments.shape[0], dtype=np.int64)
     block_moments(np.ascontiguousarray(block, dtype=np.int64), np.asarray(A, dtype=float),  # A: a view, not copied
-                  np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(y, dtype=float), first, moments, count)
+                  np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(y, dtype=float), first, moments, count,
+                  None if coef is None else np.ascontiguousarray(coef, dtype=float))
     present = np.flatnonzero(count)
     return present + first, moments[present, :, :p], moments[present, :, p]
 
@@ -224,7 +225,7 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
 
     def job(item: Callable[[], tuple[RecordingRows, np.ndarray]]):
         rec, w = item()
-        ids, G, S = _block_sums(rec.step // L, rec.A, w, rec.y - rec.A @ est.coef_)
+        ids, G, S = _block_sums(rec.step // L, rec.A, w, rec.y, est.coef_)
         inner = _block_changes(half, G[1:-1], S[1:-1]) if ids.size > 2 else None
         ends = [0, ids.size - 1] if ids.size > 1 else [0]
         return int(rec.step.min()), int(rec.step.max()), ids[ends], G[ends], S[ends], inner
