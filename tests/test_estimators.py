@@ -179,3 +179,18 @@ def test_uncertainty_outputs_and_classic_is_eq25(slip_log):
     corr = np.array(hac.correlation["matrix"])
     assert np.allclose(corr, corr.T) and np.allclose(np.diag(corr), 1) and np.all(np.abs(corr) <= 1 + 1e-9)
     assert hac.uncertainty["method"] == "hac" and hac.uncertainty["bandwidth_steps"] >= 50
+
+
+def test_interval_quantiles_equal_scipy_stats():
+    """Uncertainty.quantile takes scipy.special's ndtri and stdtrit (no scipy.stats import): the
+    same values as stats.norm.ppf and stats.t.ppf, also for infinite degrees of freedom."""
+    from scipy import stats
+
+    from agvdyn.identification.uncertainty import Uncertainty, UncertaintyMethod
+
+    cov = np.eye(4)
+    normal = Uncertainty(UncertaintyMethod.JACKKNIFE, cov).quantile(0.9)
+    assert np.array_equal(normal, np.full(4, stats.norm.ppf(0.95)))
+    dof = np.array([0.5, 3.3, 40.0, np.inf])
+    student = Uncertainty(UncertaintyMethod.JACKKNIFE, cov, dof=dof).quantile()
+    assert np.array_equal(student, stats.t.ppf(0.975, np.maximum(dof, 1.0)))

@@ -194,3 +194,39 @@ def test_compiled_zero_phase_filter_equals_scipy(order):
     got = sosfiltfilt_columns(sos, signal.sosfilt_zi(sos), x, s.padlen(DT))
     want = signal.sosfiltfilt(sos, x, axis=0)
     assert np.allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_filter_designs_kept_on_disk_equal_scipy_and_spare_its_import(tmp_path):
+    """A Butterworth design is scipy's (the same bits) whether computed or read back from the disk
+    cache; a corrupt or unwritable cache is ignored; with a warm cache scipy.signal is not imported."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from scipy import signal
+
+    code = ("import sys, json\nfrom agvdyn._filter_cache import butterworth_lowpass\n"
+            "sos, zi = butterworth_lowpass(4, 0.025464790894703253)\n"
+            "print(json.dumps([sos.tolist(), zi.tolist(), 'scipy.signal' in sys.modules]))")
+    env = {**os.environ, "AGVDYN_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(environment):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environment,
+                             timeout=120, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    want_sos = signal.butter(4, 0.025464790894703253, btype="low", output="sos")
+    want_zi = signal.sosfilt_zi(want_sos)
+    cold, warm = run(env), run(env)
+    for sos, zi, _ in (cold, warm):
+        assert np.array_equal(np.array(sos), want_sos) and np.array_equal(np.array(zi), want_zi)
+    assert cold[2] and not warm[2]  # designed once, then read back without scipy.signal
+    (cache,) = (tmp_path / "cache").iterdir()
+    cache.write_text("{not json", encoding="utf-8")
+    sos, zi, _ = run(env)
+    assert np.array_equal(np.array(sos), want_sos)
+    blocked = tmp_path / "file"  # a file where the folder should be: nothing can be written
+    blocked.write_text("", encoding="utf-8")
+    sos, zi, _ = run({**os.environ, "AGVDYN_CACHE_DIR": str(blocked / "cache")})
+    assert np.array_equal(np.array(zi), want_zi)

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
-from scipy import signal as _signal
 
 __all__ = [
     "FilterSettings",
@@ -98,9 +97,11 @@ class FilterSettings:
 
 @functools.lru_cache(maxsize=64)
 def _design(order: int, normalized_cutoff: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sections and ``sosfilt_zi`` of a Butterworth low-pass, designed once per order and cut-off."""
-    sos = _signal.butter(order, normalized_cutoff, btype="low", output="sos")
-    return sos, _signal.sosfilt_zi(sos)
+    """Sections and ``sosfilt_zi`` of a Butterworth low-pass, designed once per order and cut-off
+    (kept on disk: :mod:`agvdyn._filter_cache`)."""
+    from agvdyn._filter_cache import butterworth_lowpass
+
+    return butterworth_lowpass(order, normalized_cutoff)
 
 
 def filter_design(dt: float, settings: FilterSettings = FilterSettings()) -> tuple[np.ndarray, np.ndarray, int]:
@@ -171,7 +172,9 @@ def lowpass(x: np.ndarray, dt: float, settings: FilterSettings = FilterSettings(
 
         sos, zi = _design(settings.order, settings.cutoff / (math.pi / dt))
         return sosfiltfilt_columns(sos, zi, x.reshape(n, -1), padlen).reshape(x.shape)
-    return _signal.sosfiltfilt(settings.sos(dt), x, axis=axis)
+    from scipy import signal
+
+    return signal.sosfiltfilt(settings.sos(dt), x, axis=axis)
 
 
 def time_derivative(x: np.ndarray, dt: float, *, axis: int = 0,
@@ -235,12 +238,14 @@ def parallel_filter(x: np.ndarray, dt: float, settings: FilterSettings = FilterS
     out = moved.copy()
     n = moved.shape[0]
     flat = out.reshape(n, -1)
+    from scipy import signal
+
     sos = settings.sos(dt)
     for start, stop in bounds if bounds is not None else [(0, n)]:
         block = flat[start:stop]
         active = np.flatnonzero(np.any(block != 0.0, axis=0))
         if active.size:
-            flat[start:stop, active] = _signal.sosfiltfilt(sos, block[:, active], axis=0)
+            flat[start:stop, active] = signal.sosfiltfilt(sos, block[:, active], axis=0)
     return np.moveaxis(flat.reshape(moved.shape), 0, axis)
 
 

@@ -76,11 +76,12 @@ class Uncertainty:
     def quantile(self, level: float = 0.95) -> np.ndarray:
         """Two-sided ``level`` quantile of each parameter's interval ``value +- q std``: Student's t
         with ``dof`` degrees of freedom (the variance is itself estimated from few blocks), else normal."""
-        from scipy import stats
+        from scipy import special  # the functions behind scipy.stats' norm.ppf and t.ppf (the same values),
+        # without scipy.stats' import (~0.5 s of every command's start-up)
 
         if self.dof is None:
-            return np.full(self.cov.shape[0], stats.norm.ppf(0.5 + level / 2))
-        return stats.t.ppf(0.5 + level / 2, np.maximum(self.dof, 1.0))
+            return np.full(self.cov.shape[0], special.ndtri(0.5 + level / 2))
+        return special.stdtrit(np.maximum(self.dof, 1.0), 0.5 + level / 2)
 
 
 def _recording_jobs(est: Estimator, data: RegressionData) -> Iterator[Callable[[], tuple[RecordingRows, np.ndarray]]]:
