@@ -287,3 +287,24 @@ def test_sign_mistakes_on_exact_data_are_named(model_data, columns, cause):
         pytest.fail(f"refused as unexcited instead of naming the sign: {exc}")
     else:
         pytest.fail("a sign mistake was accepted")
+
+
+def test_identify_command_loads_no_pandas_scipy_signal_stats_or_optimize(model_log, tmp_path):
+    """Start-up of `agvdyn identify` on our Parquet log: with the filter design kept on disk (second
+    run) neither pandas, scipy.signal, scipy.stats nor scipy.optimize is imported (~1 s together)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    probe = ("import sys, json\nfrom agvdyn.cli import main\n"
+             f"sys.argv = ['agvdyn', 'identify', {str(model_log)!r}, '--out', {str(tmp_path / 'p.yaml')!r}]\n"
+             "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
+             "print(json.dumps([m for m in ('pandas', 'scipy.signal', 'scipy.stats', 'scipy.optimize') "
+             "if m in sys.modules]))")
+    env = {**os.environ, "AGVDYN_CACHE_DIR": str(tmp_path / "cache")}
+    for _ in range(2):  # the first run designs the filter and keeps it
+        out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+    assert (tmp_path / "p.yaml").is_file()

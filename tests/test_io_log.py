@@ -334,3 +334,29 @@ def test_a_rewritten_parquet_log_is_read_anew_not_from_the_kept_footer(tmp_path)
     write_log(path, make_frame(n=120))  # another size: another file version
     assert log_rows_count(path) == 120
     assert read_log(path).t.size == 120
+
+
+def test_parquet_read_without_pandas_equals_pandas_over_row_groups_and_missing_labels(tmp_path):
+    """Our Parquet columns come from pyarrow's buffers (no pandas import): the same values and
+    segment labels as pandas reads, over several row groups and with missing labels."""
+    import subprocess
+    import sys
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    frame = make_frame(n=1000)
+    labels = np.array(frame["segment"].astype(object).to_numpy(), dtype=object)
+    labels[::7] = None
+    frame["segment"] = pd.Categorical(labels, categories=list(SEGMENTS))
+    path = tmp_path / "groups.parquet"
+    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=300)
+    log = read_log(path)
+    want = pd.read_parquet(path)
+    for col in LOG_COLUMNS:
+        assert np.array_equal(log.frame[col].to_numpy(), want[col].to_numpy())
+    got_labels = log.frame["segment"].astype(object).where(log.frame["segment"].notna(), None)
+    assert list(got_labels) == list(want["segment"].astype(object).where(want["segment"].notna(), None))
+    probe = f"import sys\nfrom agvdyn.io import read_log\nread_log({str(path)!r})\nprint('pandas' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.rows import RowCounts

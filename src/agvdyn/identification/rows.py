@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 from agvdyn.identification._kernels import stretch_modes, stretch_projection
 from agvdyn.io.schema import SEGMENTS, LazyFrame

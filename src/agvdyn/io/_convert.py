@@ -5,7 +5,7 @@ from collections.abc import Mapping as MappingABC
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 from agvdyn.io.log import LOG_COLUMNS, SEGMENT_COLUMN, LogError
 from agvdyn.io.mapping import HEADING_QUANTITIES, LogMapping, SegmentRange

@@ -8,7 +8,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 from agvdyn.io.log import STOP_TOLERANCE, Log, LogError, _log_suffix, parquet_metadata, read_sidecar
 

@@ -4,6 +4,7 @@ A log has one row per sample, SI units, the columns of :data:`LOG_COLUMNS` and a
 ``segment`` column. Next to ``run.parquet`` an optional YAML sidecar ``run.parquet.yaml``
 holds facts about the run (platform, true parameters of a simulation, conversion notes).
 """
+from __future__ import annotations
 
 import os
 import threading
@@ -13,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
@@ -314,7 +315,6 @@ def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[
     optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
     None for any other file (read then through pandas, with its messages)."""
     import pyarrow as pa
-    import pyarrow.compute as pc
 
     try:
         # no pyarrow threads: logs are read in the identification's own threads (nested pools oversubscribed the cores)
@@ -329,15 +329,37 @@ def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[
         column = table.column(name)
         if column.type != pa.float64() or column.null_count:
             return None
-        columns[name] = column.to_numpy()
+        columns[name] = _numbers(column.chunks, np.float64)
     if SEGMENT_COLUMN not in names:
         return columns, None
     segment = table.column(SEGMENT_COLUMN)
     if not pa.types.is_dictionary(segment.type) or not pa.types.is_string(segment.type.value_type):
         return None
+    if not pa.types.is_integer(segment.type.index_type):
+        return None
     segment = segment.unify_dictionaries().combine_chunks() if segment.num_chunks != 1 else segment.chunk(0)
-    codes = pc.fill_null(segment.indices, -1).to_numpy(zero_copy_only=False).astype(np.int64)
+    width = segment.type.index_type.bit_width
+    kind = np.dtype(f"{'int' if pa.types.is_signed_integer(segment.type.index_type) else 'uint'}{width}")
+    indices = segment.indices
+    codes = _numbers([indices], kind).astype(np.int64)
+    if indices.null_count:  # missing labels: -1
+        codes[~_valid(indices)] = -1
     return columns, (segment.dictionary.to_pylist(), codes)
+
+
+def _numbers(chunks: list[Any], dtype: np.dtype) -> np.ndarray:
+    """The values of primitive Arrow arrays as one numpy array, read from their data buffers
+    (pyarrow's to_numpy and compute functions import pandas: ~0.4 s that reading our logs never needs)."""
+    dtype = np.dtype(dtype)
+    parts = [np.frombuffer(c.buffers()[1], dtype=dtype, count=len(c), offset=c.offset * dtype.itemsize)
+             for c in chunks if len(c)]
+    return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros(0, dtype)
+
+
+def _valid(array: Any) -> np.ndarray:
+    """Which entries of an Arrow array are not null, from its validity bitmap (LSB first)."""
+    bits = np.unpackbits(np.frombuffer(array.buffers()[0], dtype=np.uint8), bitorder="little")
+    return bits[array.offset:array.offset + len(array)].astype(bool)
 
 
 def sidecar_platform(log: Log) -> Geometry | None:

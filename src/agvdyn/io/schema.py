@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 
 #: Required columns of a log, in the order of PLATFORM.md.

@@ -5,7 +5,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd
 
 from agvdyn.io._convert import (
     DEFAULT_GAP_PERIODS,
