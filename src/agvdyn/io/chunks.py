@@ -10,7 +10,8 @@ from pathlib import Path
 
 from agvdyn._lazy import pandas as pd
 
-from agvdyn.io.log import STOP_TOLERANCE, Log, LogError, _log_suffix, parquet_metadata, read_sidecar
+from agvdyn.io.log import STOP_TOLERANCE, Log, LogError, _log_suffix, read_sidecar
+from agvdyn.io.parquet import parquet_metadata
 
 __all__ = ["CHUNK_ROWS", "CHUNK_OVERLAP", "log_rows_count", "is_long_log", "log_pieces"]
 

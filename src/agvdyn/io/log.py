@@ -7,7 +7,6 @@ holds facts about the run (platform, true parameters of a simulation, conversion
 from __future__ import annotations
 
 import os
-import threading
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -19,6 +18,7 @@ import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
+from agvdyn.io.parquet import our_parquet_columns, parquet_metadata  # noqa: F401  (re-exported)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text
 from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LOG_COLUMNS,
@@ -269,7 +269,7 @@ def read_log(
         The file cannot be read or does not satisfy the schema (message names file, column, row).
     """
     path = Path(path)
-    columns = _our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
+    columns = our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
     if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
         lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
         log = Log(path, lazy, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
@@ -280,86 +280,6 @@ def read_log(
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
                               csv_rows=path.suffix.lower() == ".csv")
     return Log(path, checked, read_sidecar(path), clipped)
-
-
-def parquet_metadata(path: str | os.PathLike) -> Any:
-    """The footer (``pyarrow.parquet.FileMetaData``) of a Parquet file, read once per file version
-    (path, size and modification time): the row count asked before a log is read and the read
-    itself share it."""
-    return _parquet_file(path).metadata
-
-
-_FOOTERS: dict[tuple[str, int, int], Any] = {}
-_FOOTERS_LOCK = threading.Lock()
-
-
-def _parquet_file(path: str | os.PathLike) -> Any:
-    """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any."""
-    import pyarrow.parquet as pq
-
-    stat = os.stat(path)
-    key = (str(path), stat.st_size, stat.st_mtime_ns)
-    with _FOOTERS_LOCK:
-        footer = _FOOTERS.get(key)
-    file = pq.ParquetFile(path, metadata=footer)
-    if footer is None:
-        with _FOOTERS_LOCK:  # the few most recent files: a log is asked for twice in a row
-            _FOOTERS[key] = file.metadata
-            while len(_FOOTERS) > 8:
-                _FOOTERS.pop(next(iter(_FOOTERS)))
-    return file
-
-
-def _our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
-    """The columns of a Parquet file that holds exactly our schema (float64 columns without nulls,
-    optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
-    None for any other file (read then through pandas, with its messages)."""
-    import pyarrow as pa
-
-    try:
-        # no pyarrow threads: logs are read in the identification's own threads (nested pools oversubscribed the cores)
-        table = _parquet_file(path).read(use_pandas_metadata=False, use_threads=False)
-    except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
-        raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
-    names = table.column_names
-    if len(set(names)) != len(names) or set(names) - {*LOG_COLUMNS, SEGMENT_COLUMN} or set(LOG_COLUMNS) - set(names):
-        return None
-    columns = {}
-    for name in LOG_COLUMNS:
-        column = table.column(name)
-        if column.type != pa.float64() or column.null_count:
-            return None
-        columns[name] = _numbers(column.chunks, np.float64)
-    if SEGMENT_COLUMN not in names:
-        return columns, None
-    segment = table.column(SEGMENT_COLUMN)
-    if not pa.types.is_dictionary(segment.type) or not pa.types.is_string(segment.type.value_type):
-        return None
-    if not pa.types.is_integer(segment.type.index_type):
-        return None
-    segment = segment.unify_dictionaries().combine_chunks() if segment.num_chunks != 1 else segment.chunk(0)
-    width = segment.type.index_type.bit_width
-    kind = np.dtype(f"{'int' if pa.types.is_signed_integer(segment.type.index_type) else 'uint'}{width}")
-    indices = segment.indices
-    codes = _numbers([indices], kind).astype(np.int64)
-    if indices.null_count:  # missing labels: -1
-        codes[~_valid(indices)] = -1
-    return columns, (segment.dictionary.to_pylist(), codes)
-
-
-def _numbers(chunks: list[Any], dtype: np.dtype) -> np.ndarray:
-    """The values of primitive Arrow arrays as one numpy array, read from their data buffers
-    (pyarrow's to_numpy and compute functions import pandas: ~0.4 s that reading our logs never needs)."""
-    dtype = np.dtype(dtype)
-    parts = [np.frombuffer(c.buffers()[1], dtype=dtype, count=len(c), offset=c.offset * dtype.itemsize)
-             for c in chunks if len(c)]
-    return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros(0, dtype)
-
-
-def _valid(array: Any) -> np.ndarray:
-    """Which entries of an Arrow array are not null, from its validity bitmap (LSB first)."""
-    bits = np.unpackbits(np.frombuffer(array.buffers()[0], dtype=np.uint8), bitorder="little")
-    return bits[array.offset:array.offset + len(array)].astype(bool)
 
 
 def sidecar_platform(log: Log) -> Geometry | None:

@@ -1,0 +1,95 @@
+"""Reading Parquet logs in our schema with pyarrow, straight into numpy (:func:`agvdyn.io.log.read_log`):
+the footer is read once per file version, and the columns come from pyarrow's buffers, so that
+reading our logs imports no pandas."""
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agvdyn.io.schema import LOG_COLUMNS, SEGMENT_COLUMN, LogError
+
+__all__ = ["parquet_metadata", "our_parquet_columns"]
+
+
+def parquet_metadata(path: str | os.PathLike) -> Any:
+    """The footer (``pyarrow.parquet.FileMetaData``) of a Parquet file, read once per file version
+    (path, size and modification time): the row count asked before a log is read and the read
+    itself share it."""
+    return _parquet_file(path).metadata
+
+
+_FOOTERS: dict[tuple[str, int, int], Any] = {}
+_FOOTERS_LOCK = threading.Lock()
+
+
+def _parquet_file(path: str | os.PathLike) -> Any:
+    """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any."""
+    import pyarrow.parquet as pq
+
+    stat = os.stat(path)
+    key = (str(path), stat.st_size, stat.st_mtime_ns)
+    with _FOOTERS_LOCK:
+        footer = _FOOTERS.get(key)
+    file = pq.ParquetFile(path, metadata=footer)
+    if footer is None:
+        with _FOOTERS_LOCK:  # the few most recent files: a log is asked for twice in a row
+            _FOOTERS[key] = file.metadata
+            while len(_FOOTERS) > 8:
+                _FOOTERS.pop(next(iter(_FOOTERS)))
+    return file
+
+
+def our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
+    """The columns of a Parquet file that holds exactly our schema (float64 columns without nulls,
+    optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
+    None for any other file (read then through pandas, with its messages)."""
+    import pyarrow as pa
+
+    try:
+        # no pyarrow threads: logs are read in the identification's own threads (nested pools oversubscribed the cores)
+        table = _parquet_file(path).read(use_pandas_metadata=False, use_threads=False)
+    except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
+        raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
+    names = table.column_names
+    if len(set(names)) != len(names) or set(names) - {*LOG_COLUMNS, SEGMENT_COLUMN} or set(LOG_COLUMNS) - set(names):
+        return None
+    columns = {}
+    for name in LOG_COLUMNS:
+        column = table.column(name)
+        if column.type != pa.float64() or column.null_count:
+            return None
+        columns[name] = _numbers(column.chunks, np.float64)
+    if SEGMENT_COLUMN not in names:
+        return columns, None
+    segment = table.column(SEGMENT_COLUMN)
+    if not pa.types.is_dictionary(segment.type) or not pa.types.is_string(segment.type.value_type):
+        return None
+    if not pa.types.is_integer(segment.type.index_type):
+        return None
+    segment = segment.unify_dictionaries().combine_chunks() if segment.num_chunks != 1 else segment.chunk(0)
+    width = segment.type.index_type.bit_width
+    kind = np.dtype(f"{'int' if pa.types.is_signed_integer(segment.type.index_type) else 'uint'}{width}")
+    indices = segment.indices
+    codes = _numbers([indices], kind).astype(np.int64)
+    if indices.null_count:  # missing labels: -1
+        codes[~_valid(indices)] = -1
+    return columns, (segment.dictionary.to_pylist(), codes)
+
+
+def _numbers(chunks: list[Any], dtype: np.dtype) -> np.ndarray:
+    """The values of primitive Arrow arrays as one numpy array, read from their data buffers
+    (pyarrow's to_numpy and compute functions import pandas: ~0.4 s that reading our logs never needs)."""
+    dtype = np.dtype(dtype)
+    parts = [np.frombuffer(c.buffers()[1], dtype=dtype, count=len(c), offset=c.offset * dtype.itemsize)
+             for c in chunks if len(c)]
+    return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros(0, dtype)
+
+
+def _valid(array: Any) -> np.ndarray:
+    """Which entries of an Arrow array are not null, from its validity bitmap (LSB first)."""
+    bits = np.unpackbits(np.frombuffer(array.buffers()[0], dtype=np.uint8), bitorder="little")
+    return bits[array.offset:array.offset + len(array)].astype(bool)
