@@ -374,7 +374,6 @@ def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step
     return count
 
 
-
 @numba.njit(cache=True, nogil=True)
 def median_and_mad(x):  # pragma: no cover - compiled
     """``(median(x), median(|x - median(x)|))`` of a 1-D array, as numpy's, without the GIL (two
