@@ -230,3 +230,9 @@ def test_filter_designs_kept_on_disk_equal_scipy_and_spare_its_import(tmp_path):
     blocked.write_text("", encoding="utf-8")
     sos, zi, _ = run({**os.environ, "AGVDYN_CACHE_DIR": str(blocked / "cache")})
     assert np.array_equal(np.array(zi), want_zi)
+    work = tmp_path / "work"  # a relative cache folder is never written into the working directory
+    work.mkdir()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
+                         cwd=work, env={**os.environ, "AGVDYN_CACHE_DIR": "relative"})
+    assert np.array_equal(np.array(json.loads(out.stdout.strip().splitlines()[-1])[0]), want_sos)
+    assert list(work.iterdir()) == []

@@ -20,12 +20,15 @@ _LOCK = threading.Lock()
 _LOADED: dict[str, tuple[list, list]] | None = None
 
 
-def cache_file() -> Path:
-    """Where the designs are kept (depends on the environment and the installed scipy)."""
+def cache_file() -> Path | None:
+    """Where the designs are kept (depends on the environment and the installed scipy); None when
+    there is no absolute place for it (no home directory): designs are then not kept."""
     import scipy  # the package alone: cheap
 
     folder = os.environ.get("AGVDYN_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "agvdyn")
+    if not os.path.isabs(folder):  # "~" unexpanded, or a relative setting: never write into the working directory
+        return None
     return Path(folder) / f"butterworth-scipy-{scipy.__version__}.json"
 
 
@@ -52,8 +55,9 @@ def butterworth_lowpass(order: int, normalized_cutoff: float) -> tuple[np.ndarra
 def _designs() -> dict[str, tuple[list, list]]:
     global _LOADED
     if _LOADED is None:
+        path = cache_file()
         try:
-            data = json.loads(cache_file().read_text(encoding="utf-8"))
+            data = json.loads(path.read_text(encoding="utf-8")) if path is not None else {}
             _LOADED = data if isinstance(data, dict) else {}
         except (OSError, ValueError):
             _LOADED = {}
@@ -63,7 +67,10 @@ def _designs() -> dict[str, tuple[list, list]]:
 def _store(designs: dict[str, tuple[list, list]]) -> None:
     from agvdyn._files import write_text_atomically
 
+    path = cache_file()
+    if path is None:
+        return
     try:
-        write_text_atomically(cache_file(), json.dumps(designs))
+        write_text_atomically(path, json.dumps(designs))
     except OSError:  # read-only home, full disk: designed again next time
         pass
