@@ -32,15 +32,18 @@ def keep_freed_memory(trim: int = 64 << 20, top_pad: int = 16 << 20) -> bool:
             libc.mallopt(option, value)
     except (OSError, AttributeError):
         return False
-    _arrow_from_glibc(os, sys)
+    _arrow_from_glibc()
     _KEPT = True
     return True
 
 
-def _arrow_from_glibc(os, sys) -> None:
+def _arrow_from_glibc() -> None:
     """pyarrow allocates from glibc (its ``system`` pool) so that a read log's freed buffers serve
     the next log's read: with mimalloc, pyarrow's default, reading a 35,500-sample log took 3.6-4.4
     ms against 2.7-3.5 (25 logs read in turn). ARROW_DEFAULT_MEMORY_POOL in the environment wins."""
+    import os
+    import sys
+
     if "ARROW_DEFAULT_MEMORY_POOL" in os.environ:
         return
     if "pyarrow" not in sys.modules:

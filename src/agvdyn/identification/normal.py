@@ -116,7 +116,7 @@ def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None,
         used |= np.abs(old).max(axis=0) > 0
     cols = np.flatnonzero(used)
     # gathered column by column into a Fortran-ordered copy that LAPACK overwrites (no second copy)
-    a = rows.T[cols].T if old is None else np.vstack([rows[:, cols], old[:, cols]]).T.copy().T
+    a = rows.T[cols].T if old is None else np.asfortranarray(np.vstack([rows[:, cols], old[:, cols]]))
     R = np.zeros((size, size))
     if a.shape[0] == 0 or cols.size == 0:
         return R

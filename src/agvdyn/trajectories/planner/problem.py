@@ -193,8 +193,8 @@ class _Problem:
         p = self.settings.peak_exponent
         if math.isinf(p):
             s, kind, i, peak = self.scale(j, c, T)
-            row = (B.Cv[i], B.Ca[i] / T, T * B.Cq[i])[kind] if kind < 3 else \
-                m.K[0, i % 4] * B.Ca[i // 4] / T + m.K[1, i % 4] * B.Cv[i // 4]
+            row = (B.Cv[i] if kind == 0 else B.Ca[i] / T if kind == 1 else T * B.Cq[i] if kind == 2
+                   else m.K[0, i % 4] * B.Ca[i // 4] / T + m.K[1, i % 4] * B.Cv[i // 4])  # the peak's row only
             return s, -s / peak * row
         v0, a0, q0 = B.Cv @ c, B.Ca @ c / T, T * (B.Cq @ c)
         y = np.outer(a0, m.K[0]) + np.outer(v0, m.K[1])
@@ -330,7 +330,7 @@ class _Problem:
         return J, grad
 
     def _theta_gradient(self, j: int, GF: np.ndarray, GO: np.ndarray, lam: float, aux, T: float) -> np.ndarray:
-        m, B = self.models[j], self.bases[j]
+        B = self.bases[j]
         c, s, ds_dc, v0, a0, Z, w, unit, dt_row = aux
         ZF, ZO = Z @ GF, Z @ GO  # (n, 4)
         qF, qO = np.einsum("ni,ni->n", ZF, Z), np.einsum("ni,ni->n", ZO, Z)
