@@ -60,8 +60,8 @@ def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
 
 
 def _pad_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a + b`` padded to the longer, in place of one of them (both are fresh arrays of ours)."""
     if a.shape[0] < b.shape[0]:
         a, b = b, a
-    a = a.copy()
     a[: b.shape[0]] += b
     return a

@@ -18,7 +18,7 @@ import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
-from agvdyn.io.parquet import our_parquet_columns, parquet_metadata  # noqa: F401  (re-exported)
+from agvdyn.io.parquet import our_parquet_columns, parquet_metadata, write_our_parquet  # noqa: F401  (re-exported)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text
 from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LOG_COLUMNS,
@@ -351,11 +351,7 @@ def write_log(
             raise TypeError(f"sidecar: expected a dict, got {type(sidecar).__name__}")
         side_text = yaml.safe_dump(_plain(sidecar), sort_keys=False)
     if suffix == ".parquet":
-        # floats plain and uncompressed (noisy samples hardly compress: +15 % size, half the read time),
-        # the segment labels dictionary-encoded
-        segment = [SEGMENT_COLUMN] if SEGMENT_COLUMN in checked.columns else False
-        write_atomically(path, lambda tmp: checked.to_parquet(tmp, index=False, compression=None,
-                                                              use_dictionary=segment))
+        write_atomically(path, lambda tmp: write_our_parquet(tmp, checked))
     else:
         write_atomically(path, lambda tmp: checked.to_csv(tmp, index=False))
     side = sidecar_path(path)

@@ -12,14 +12,16 @@ import numpy as np
 
 from agvdyn.io.schema import LOG_COLUMNS, SEGMENT_COLUMN, LogError
 
-__all__ = ["parquet_metadata", "our_parquet_columns"]
+__all__ = ["parquet_metadata", "our_parquet_columns", "write_our_parquet"]
 
 
 def parquet_metadata(path: str | os.PathLike) -> Any:
     """The footer (``pyarrow.parquet.FileMetaData``) of a Parquet file, read once per file version
     (path, size and modification time): the row count asked before a log is read and the read
     itself share it."""
-    return _parquet_file(path).metadata
+    with _FOOTERS_LOCK:
+        footer = _FOOTERS.get(_version(path))
+    return footer if footer is not None else _parquet_file(path).metadata
 
 
 _FOOTERS: dict[tuple[str, int, int], Any] = {}
@@ -30,8 +32,7 @@ def _parquet_file(path: str | os.PathLike) -> Any:
     """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any."""
     import pyarrow.parquet as pq
 
-    stat = os.stat(path)
-    key = (str(path), stat.st_size, stat.st_mtime_ns)
+    key = _version(path)
     with _FOOTERS_LOCK:
         footer = _FOOTERS.get(key)
     file = pq.ParquetFile(path, metadata=footer)
@@ -41,6 +42,27 @@ def _parquet_file(path: str | os.PathLike) -> Any:
             while len(_FOOTERS) > 8:
                 _FOOTERS.pop(next(iter(_FOOTERS)))
     return file
+
+
+def _version(path: str | os.PathLike) -> tuple[str, int, int]:
+    stat = os.stat(path)
+    return str(path), stat.st_size, stat.st_mtime_ns
+
+
+def write_our_parquet(path: str | os.PathLike, frame: Any) -> None:
+    """Write a checked log (a DataFrame of our columns) as Parquet: floats plain and uncompressed
+    (noisy samples hardly compress: +15 % size, half the read time) in required (non-nullable)
+    columns, which pyarrow reads without definition levels (0.9 against 1.4 ms per 35,500-sample
+    log), the segment labels dictionary-encoded. pandas' metadata is kept (``pd.read_parquet``
+    gives the same frame back)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    fields = [f.with_nullable(False) if f.name in LOG_COLUMNS else f for f in table.schema]
+    table = table.cast(pa.schema(fields, metadata=table.schema.metadata))
+    segment = [SEGMENT_COLUMN] if SEGMENT_COLUMN in table.column_names else False
+    pq.write_table(table, path, compression="none", use_dictionary=segment)
 
 
 def our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
