@@ -360,3 +360,27 @@ def test_parquet_read_without_pandas_equals_pandas_over_row_groups_and_missing_l
     probe = f"import sys\nfrom agvdyn.io import read_log\nread_log({str(path)!r})\nprint('pandas' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_our_parquet_log_has_required_float_columns_and_reads_back_as_written(tmp_path):
+    """write_log stores the float columns as required (no definition levels to decode) and keeps
+    pandas' metadata: pandas and read_log give back the checked frame; a nullable file of the same
+    values (another writer's) reads the same."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    frame = make_frame(n=400)
+    path = write_log(tmp_path / "req.parquet", frame)
+    schema = pq.read_schema(path)
+    assert all(not schema.field(c).nullable for c in LOG_COLUMNS)
+    assert pa.types.is_dictionary(schema.field("segment").type)
+    back = pd.read_parquet(path)
+    assert isinstance(back["segment"].dtype, pd.CategoricalDtype)
+    nullable = tmp_path / "nullable.parquet"
+    pq.write_table(pa.Table.from_pandas(back, preserve_index=False), nullable)
+    assert pq.read_schema(nullable).field("t").nullable
+    for p in (path, nullable):
+        log = read_log(p)
+        for col in LOG_COLUMNS:
+            assert np.array_equal(log.frame[col].to_numpy(), frame[col].to_numpy())
+        assert list(log.frame["segment"].astype(object)) == list(frame["segment"].astype(object))

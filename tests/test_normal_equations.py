@@ -205,3 +205,31 @@ def test_torque_alignment_of_a_zero_order_hold_drive():
     assert out[0, 0] == 0.0 and align_torque(m, 0.0) is m
     with pytest.raises(ValueError, match="torque_lead"):
         IdentificationSettings(torque_lead=2.0)
+
+
+def test_the_kept_thread_pool_runs_nested_maps_inline_and_is_new_after_a_fork():
+    """ordered_map's threads are kept between calls; a job that maps again runs that map itself (a
+    full pool cannot deadlock), results stay in order, and a forked child starts its own pool."""
+    import os
+
+    from agvdyn.identification import _threads
+
+    inner = lambda k: list(_threads.ordered_map(lambda j: (k, j), range(3), 2))  # noqa: E731
+    assert list(_threads.ordered_map(inner, range(6), 2)) == [[(k, j) for j in range(3)] for k in range(6)]
+    pool = _threads._pool(2)
+    assert list(_threads.ordered_map(lambda x: x * x, range(10), 2)) == [x * x for x in range(10)]
+    assert _threads._pool(2) is pool
+    if not hasattr(os, "fork"):
+        return
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # pragma: no cover - the child
+        try:
+            ok = _threads._pool(2) is not pool and list(_threads.ordered_map(abs, [-1, -2, -3], 2)) == [1, 2, 3]
+            os.write(write, b"1" if ok else b"0")
+        finally:
+            os._exit(0)
+    os.close(write)
+    assert os.read(read, 1) == b"1"
+    os.waitpid(child, 0)
+    os.close(read)
