@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -83,6 +84,11 @@ def test_hac_against_the_known_long_run_variance(phi, seed):
     assert est.std_[0] == pytest.approx(1 / math.sqrt(n), rel=0.05)
     tau = correlation_time([e[:, None]])[0]
     assert tau == pytest.approx((1 + phi) / (1 - phi), rel=0.35)
+    # scores of any scale (a near-exact fit weighted by tiny variances reaches 1e16): the same time
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scaled = correlation_time([np.column_stack([e, 1e17 * e])])
+    assert scaled == pytest.approx([tau, tau], rel=1e-5)
 
 
 def test_bootstrap_agrees_with_hac_on_correlated_residuals():

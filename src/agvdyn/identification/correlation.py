@@ -51,9 +51,12 @@ def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *,
 
 def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
     """Unnormalised autocovariance sums (n, p) of the columns of x (n, p), by FFT in single
-    precision (~7 digits of rho are plenty for a window sum)."""
-    x = np.ascontiguousarray(x.T, dtype=np.float32)
-    n = x.shape[1]
+    precision (~7 digits of rho are plenty for a window sum); in double precision where the sums
+    would overflow single's range (scores of a near-exact fit weighted by tiny residual variances)."""
+    n = x.shape[0]
+    peak = float(np.abs(x).max()) if x.size else 0.0
+    single = peak * peak * max(n, 1) < 1e30  # float32 overflows at 3.4e38; rounding in the FFT adds headroom
+    x = np.ascontiguousarray(x.T, dtype=np.float32 if single else np.float64)
     size = scipy.fft.next_fast_len(2 * n, real=True)
     f = scipy.fft.rfft(x, size, axis=1, workers=fft_threads)
     return scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=fft_threads)[:, :n].T.astype(float)
