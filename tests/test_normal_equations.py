@@ -214,8 +214,18 @@ def test_the_kept_thread_pool_runs_nested_maps_inline_and_is_new_after_a_fork():
 
     from agvdyn.identification import _threads
 
-    inner = lambda k: list(_threads.ordered_map(lambda j: (k, j), range(3), 2))  # noqa: E731
-    assert list(_threads.ordered_map(inner, range(6), 2)) == [[(k, j) for j in range(3)] for k in range(6)]
+    import threading
+
+    def inner(k):  # runs in a pool thread: its own map must run there, not wait on the full pool
+        outer = threading.get_ident()
+        return list(_threads.ordered_map(lambda j: (k, j, threading.get_ident() == outer), range(3), 2))
+
+    got = []
+    runner = threading.Thread(target=lambda: got.append(list(_threads.ordered_map(inner, range(6), 2))), daemon=True)
+    runner.start()
+    runner.join(60)
+    assert not runner.is_alive(), "nested ordered_map deadlocked on the kept pool"
+    assert got == [[[(k, j, True) for j in range(3)] for k in range(6)]]
     pool = _threads._pool(2)
     assert list(_threads.ordered_map(lambda x: x * x, range(10), 2)) == [x * x for x in range(10)]
     assert _threads._pool(2) is pool
