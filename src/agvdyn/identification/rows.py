@@ -235,7 +235,9 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
         if m is Mode.CAR_LIKE:
             offs = offsets[:, :k]
         else:
-            offs = constant.setdefault(m, np.broadcast_to(tables.offsets[m, :k], (n, k, 4)))
+            offs = constant.get(m)
+            if offs is None:  # once per mode (setdefault would build it for every run)
+                offs = constant[m] = np.broadcast_to(tables.offsets[m, :k], (n, k, 4))
         cuts = [a, b] if changes is None else [a, *changes[np.searchsorted(changes, a, "right"):
                                                             np.searchsorted(changes, b, "left")].tolist(), b]
         for c, d in zip(cuts, cuts[1:]):  # a run split where the label changes (block names only)

@@ -7,6 +7,8 @@ the next log (``identify(..., keep_blocks=False)``) pass one.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from agvdyn._memory import keep_freed_memory  # re-exported
@@ -23,7 +25,7 @@ class Workspace:
     def empty(self, name: str, shape: tuple[int, ...], dtype: type | np.dtype = np.float64) -> np.ndarray:
         """An uninitialised array of ``shape`` and ``dtype`` in the buffer ``name``."""
         dtype = np.dtype(dtype)
-        size = int(np.prod(shape)) * dtype.itemsize
+        size = int(math.prod(shape)) * dtype.itemsize  # not np.prod: ~5 us a call, dozens of calls per log
         buffer = self._buffers.get(name)
         if buffer is None or buffer.nbytes < size:
             buffer = np.empty(max(size, 1), dtype=np.uint8)
