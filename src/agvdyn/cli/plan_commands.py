@@ -12,6 +12,9 @@ from rich.table import Table
 
 from agvdyn.cli._app import app, fail, platform_option
 
+#: Default of ``--verify`` (docs/planning.md, "Stop 22").
+VERIFY_DEFAULT = 4
+
 
 @app.command()
 def plan(
@@ -30,6 +33,10 @@ def plan(
                                             "plant's torque_limit) bound the plan; see docs/simulation.md."),
     starts: int = typer.Option(6, help="Random starts of the optimiser."),
     seed: int = typer.Option(0, help="Seed of the starts."),
+    verify: int = typer.Option(VERIFY_DEFAULT, "--verify", min=0, help="Noise seeds per candidate for a check on the "
+                               "simulator: the best starts and the default sequence are simulated and identified "
+                               "(identify's defaults) on seeds 100, 101, ... and the candidate furthest inside the "
+                               "bars (std ratios, cond, errors) is kept; 0: off (the best predicted objective)."),
     figure: Optional[Path] = typer.Option(None, help="Also save the floor, path and predicted stds as a figure "
                                           "(.png, .svg or .pdf)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -48,7 +55,8 @@ def plan(
         raise fail(f"--out {out}: unknown suffix {out.suffix!r}: expected .yaml or .yml")
     try:
         sim = SimulationSettings() if settings is None else read_settings(settings)
-        plan_settings = PlanSettings(objective=objective, starts=starts, seed=seed)
+        plan_settings = PlanSettings(objective=objective, starts=starts, seed=seed,
+                                     candidates=starts if verify > 0 else 1)
         rectangle = parse_floor(floor)
     except ValueError as exc:
         raise fail(str(exc)) from exc
@@ -61,6 +69,15 @@ def plan(
         result = make_plan(geom, rectangle, duration, params=nominal, limits=limits, settings=plan_settings)
     except (TrajectoryError, ValueError) as exc:
         raise fail(str(exc)) from exc
+    verification = None
+    if verify > 0:
+        from agvdyn.plan_check import verify_plan
+
+        try:
+            result, verification = verify_plan(result, verify, settings=sim)
+        except Exception as exc:  # noqa: BLE001 - the default sequence not identified, a limit broken, ...
+            raise fail(f"--verify: the check on the simulator failed ({type(exc).__name__}: {exc}); "
+                       "plan with --verify 0 to skip it") from exc
     try:
         written = write_text_atomically(out, yaml.safe_dump(result.to_yaml_dict(), sort_keys=False))
         if figure is not None:
@@ -73,6 +90,7 @@ def plan(
     if as_json:
         data = result.to_dict()
         data["out"] = str(written)
+        data["verification"] = None if verification is None else verification.to_dict()
         typer.echo(json.dumps(data, indent=2))
         return
     console = Console()
@@ -98,7 +116,29 @@ def plan(
         phases.add_row(p.name, p.mode, f"{p.duration:.1f}", str(p.harmonics), f"{p.peak_position:.3g}",
                        f"{p.peak_velocity:.3g}", f"{p.peak_acceleration:.3g}", p.limiting)
     console.print(phases)
-    console.print(f"planned in {result.elapsed:.1f} s from {len(result.starts)} starts; wrote {written}"
+    if verification is not None:
+        _print_verification(console, verification)
+    checked = "" if verification is None else f", checked on the simulator in {verification.elapsed:.1f} s"
+    console.print(f"planned in {result.elapsed:.1f} s from {len(result.starts)} starts{checked}; wrote {written}"
                   + (f" and {figure}" if figure is not None else ""))
-    for warning in result.warnings:
+    for warning in result.warnings + (verification.warnings if verification is not None else ()):
         console.print(f"[yellow]warning:[/yellow] {warning}", highlight=False)
+
+
+def _print_verification(console: Console, verification) -> None:
+    """The candidates measured on the simulator next to their prediction (``--verify``)."""
+    seeds = verification.seeds
+    on = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]} (means)"
+    table = Table(title=f"Candidates simulated and identified on {on}, std ratios "
+                        f"to the default sequence (cond {verification.default_cond:.2f}); score <= 1 meets the bars")
+    for col in ("start", "predicted objective", "predicted cond", "cond", "predicted worst ratio", "worst ratio",
+                "max error %", "score", ""):
+        table.add_column(col, justify="right")
+    for c in verification.candidates:
+        pw = max(c.predicted_ratio, key=c.predicted_ratio.get)
+        measured = (f"{c.ratio[c.worst]:.2f} ({c.worst})" if c.failure is None else c.failure[:40])
+        table.add_row(str(c.start), f"{c.objective_value:.3g}", f"{c.predicted_cond:.2f}", f"{c.cond:.2f}",
+                      f"{c.predicted_ratio[pw]:.2f} ({pw})", measured,
+                      f"{max(c.error.values(), default=float('nan')):.1f}",
+                      f"{c.score:.3f}", "chosen" if c.rank == verification.chosen else "")
+    console.print(table)

@@ -5,7 +5,7 @@ import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -56,6 +56,19 @@ class PhaseDesign:
                 "limiting": self.limiting, "fourier": self.series.to_dict()}
 
 
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """One start's plan, built and evaluated exactly (:attr:`Plan.candidates`): ``rank`` 0 is the
+    start with the best predicted objective."""
+
+    start: int
+    rank: int
+    objective_value: float
+    trajectory: Trajectory
+    phases: tuple[PhaseDesign, ...]
+    evaluation: SequenceEvaluation
+
+
 #: What a plan should reach (issue 11): cond(Theta_1w^T Theta_1w) at most 9 and at most 0.6x the
 #: default sequence's in the same floor and duration; :attr:`Plan.warnings` names a miss.
 COND_BAR = 9.0
@@ -80,6 +93,8 @@ class Plan:
     params: Parameters
     settings: PlanSettings
     limits: Limits
+    candidates: tuple[Candidate, ...] = ()
+    chosen: int = 0
 
     @property
     def cond(self) -> float:
@@ -102,6 +117,15 @@ class Plan:
                        "vehicle or simulator before use, or plan with another --seed or more --starts")
         return tuple(out)
 
+    def choose(self, rank: int) -> "Plan":
+        """The same plan with the candidate of ``rank`` (its index in :attr:`candidates`) as the plan,
+        e.g. the one a check on the simulator prefers (:func:`agvdyn.plan_check.verify_plan`)."""
+        if not 0 <= rank < len(self.candidates):
+            raise IndexError(f"candidate {rank}: the plan keeps {len(self.candidates)} (PlanSettings.candidates)")
+        c = self.candidates[rank]
+        return replace(self, trajectory=c.trajectory, phases=c.phases, evaluation=c.evaluation,
+                       objective_value=c.objective_value, chosen=rank)
+
     def to_dict(self) -> dict[str, Any]:
         """Summary (``agvdyn plan --json``)."""
         ev = self.evaluation.to_dict()
@@ -119,6 +143,7 @@ class Plan:
             "phases": [p.to_dict() for p in self.phases],
             "default": {**self.reference.to_dict(), "floor_used": self.reference.to_dict()["floor"]},
             "starts": list(self.starts),
+            "chosen_start": self.candidates[self.chosen].start if self.candidates else None,
             "elapsed_s": self.elapsed,
             "platform": self.trajectory.geometry.to_dict(),
             "warnings": list(self.warnings),
@@ -263,13 +288,16 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
                         periods)
         jobs.append((problem_args, x0, k))
     results = _run_starts(jobs, settings)
-    best = min(range(len(results)), key=lambda i: results[i][0])
-    fun, x, harmonics, _ = results[best]
-    problem = _Problem(*jobs[best][0])
-    traj, phases = _build(problem, x, geom, params, limits, settings, dt)
-    evaluation = evaluate_sequence(traj, params, limits, settings)
-    return Plan(traj, phases, floor, evaluation, reference, reference_traj, settings.objective, float(fun),
-                tuple(r[3] for r in results), time.perf_counter() - t_start, params, settings, limits)
+    order = sorted(range(len(results)), key=lambda i: results[i][0])
+    candidates = []
+    for rank, i in enumerate(order[:settings.candidates]):  # the best starts, built and evaluated exactly
+        traj, phases = _build(_Problem(*jobs[i][0]), results[i][1], geom, params, limits, settings, dt)
+        candidates.append(Candidate(results[i][3]["start"], rank, float(results[i][0]), traj, phases,
+                                    evaluate_sequence(traj, params, limits, settings)))
+    best = candidates[0]
+    return Plan(best.trajectory, best.phases, floor, best.evaluation, reference, reference_traj, settings.objective,
+                best.objective_value, tuple(r[3] for r in results), time.perf_counter() - t_start, params, settings,
+                limits, tuple(candidates))
 
 
 _LIMITING = ("velocity", "acceleration", "excursion", "motor torque")

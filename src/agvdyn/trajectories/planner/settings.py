@@ -157,6 +157,9 @@ class PlanSettings:
     max_iterations : of L-BFGS-B per start; with ``explore_iterations`` below it, every start runs
         that many and only the ``refine`` starts with the best objective go on to ``max_iterations``
         (with ``peak_exponent`` 64: 26 s instead of 61 s for six starts, the same best start).
+    candidates : how many of the starts, best predicted objective first, :func:`plan` builds and
+        evaluates exactly (:attr:`Plan.candidates`, about 0.3 s each) for a check on the simulator
+        (:func:`agvdyn.plan_check.verify_plan`, ``agvdyn plan --verify``); 1: the best alone.
     noise : :class:`NoiseLevels`. torque_offsets : the identification estimates motor-torque offsets.
     """
 
@@ -193,6 +196,7 @@ class PlanSettings:
     max_iterations: int = 300
     explore_iterations: int = 300
     refine: int = 2
+    candidates: int = 1
     noise: NoiseLevels = field(default_factory=NoiseLevels)
     torque_offsets: bool = True
 
@@ -224,7 +228,7 @@ class PlanSettings:
             raise TrajectoryError(f"steering_excursion={self.steering_excursion!r}: expected < pi/2 (the stops)")
         if not (len(self.periods) == len(PHASES) and all(isinstance(p, int) and p >= 1 for p in self.periods)):
             raise TrajectoryError(f"periods={self.periods!r}: expected {len(PHASES)} integers >= 1 (one per phase)")
-        for key in ("max_iterations", "explore_iterations", "refine"):
+        for key in ("max_iterations", "explore_iterations", "refine", "candidates"):
             value = getattr(self, key)
             if not (isinstance(value, int) and value >= 1):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected an integer >= 1")

@@ -1,0 +1,151 @@
+"""The plan checked on the simulator (agvdyn.plan_check, ``agvdyn plan --verify``): the choice among the
+candidates follows the measured score, the JSON reports it, and the planner stays below the simulation."""
+from __future__ import annotations
+
+import ast
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from typer.testing import CliRunner
+
+import agvdyn.plan_check as pc
+from agvdyn.cli import app
+from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
+from agvdyn.trajectories import planner as pl
+
+P = PAPER_PARAMETERS
+SRC = Path(pc.__file__).resolve().parent
+
+
+@pytest.fixture(scope="module")
+def two_candidates():
+    """A quick plan in 3 m x 2 m that keeps its two starts as candidates."""
+    return pl.plan(PROTOTYPE, "3x2", settings=pl.PlanSettings(starts=2, workers=1, max_iterations=60, candidates=2))
+
+
+def _check(rank: int, ratio: float, cond: float = 6.0, share: float = 0.5, default_cond: float = 17.0):
+    r = {n: ratio for n in pl.FREE}
+    return pc.CandidateCheck(rank, 10 + rank, float(rank), cond, r, cond, r, r, {n: 1.0 for n in pl.FREE}, share,
+                             pc.measured_score(r, cond, default_cond, share))
+
+
+def test_score_is_the_worst_share_of_the_bars():
+    r = {n: 0.5 for n in pl.FREE}
+    assert pc.measured_score({**r, "m_ch": 0.97}, 7.0, 17.0, 0.4) == pytest.approx(0.97)
+    assert pc.measured_score(r, 9.9, 20.0, 0.4) == pytest.approx(1.1)  # bar 9
+    assert pc.measured_score(r, 6.6, 10.0, 0.4) == pytest.approx(1.1)  # bar 0.6 x 10
+    assert pc.measured_score(r, 6.0, 17.0, 1.3) == pytest.approx(1.3)  # an error beyond 5 % / 3 std
+
+
+def test_choose_takes_the_smaller_measured_score_then_the_better_prediction():
+    assert pc.choose([_check(0, 0.95), _check(1, 0.80)]) == 1
+    assert pc.choose([_check(0, 0.80), _check(1, 0.95)]) == 0
+    assert pc.choose([_check(0, 0.80, cond=9.5), _check(1, 0.95)]) == 1  # cond above the bar outweighs
+    assert pc.choose([_check(0, 0.90), _check(1, 0.90)]) == 0
+    # the best predicted start is kept unless another is better by more than prefer_predicted
+    assert pc.choose([_check(0, 0.84), _check(1, 0.80)]) == 0
+    assert pc.choose([_check(0, 0.84), _check(1, 0.80)], prefer_predicted=0.0) == 1
+    assert pc.choose([_check(0, 0.86), _check(1, 0.80), _check(2, 0.78)]) == 2
+
+
+def _fake_runs(monkeypatch, plan_, stds):
+    """``_run`` replaced: the default sequence gives std 1 for all ten, candidate k gives ``stds[k]``."""
+    by_traj = {id(c.trajectory): s for c, s in zip(plan_.candidates, stds)}
+
+    def run(trajectory, plan, seed, settings):
+        std = 1.0 if trajectory is plan_.reference_trajectory else by_traj[id(trajectory)]
+        values = P if trajectory is plan_.reference_trajectory else P.replace(C_r=0.97 * P.C_r)
+        return SimpleNamespace(std={n: std for n in pl.FREE}, parameters=values,
+                               condition_number=17.0 if std == 1.0 else 6.0)
+
+    monkeypatch.setattr(pc, "_run", run)
+
+
+@pytest.mark.parametrize("stds,expected", [((0.9, 0.7), 1), ((0.7, 0.9), 0), ((0.72, 0.7), 0)])
+def test_verify_plan_keeps_the_candidate_measured_best(monkeypatch, two_candidates, stds, expected):
+    _fake_runs(monkeypatch, two_candidates, stds)
+    chosen, verification = pc.verify_plan(two_candidates, (7, 8))
+    assert verification.chosen == expected and chosen.chosen == expected
+    assert chosen.trajectory is two_candidates.candidates[expected].trajectory
+    assert chosen.evaluation is two_candidates.candidates[expected].evaluation
+    check = verification.chosen_check
+    assert check.ratio["m_ch"] == pytest.approx(stds[expected])
+    assert check.error["C_r"] == pytest.approx(3.0) and check.score == pytest.approx(stds[expected])
+    assert verification.seeds == (7, 8) and verification.default_cond == 17.0
+    data = chosen.to_dict()
+    assert data["chosen_start"] == two_candidates.candidates[expected].start
+    assert verification.warnings == ()  # every bar met (ratios < 1, cond 6 < 9, C_r 3 % off)
+
+
+def test_verify_plan_on_the_simulator(two_candidates):
+    """Real runs (one seed): both candidates measured, the chosen one has the smallest score, and the
+    measured cond follows the predicted one (within 5 %)."""
+    chosen, verification = pc.verify_plan(two_candidates, 1)
+    assert verification.seeds == (pc.VERIFY_SEED0,)
+    assert len(verification.candidates) == 2
+    scores = [c.score for c in verification.candidates]
+    assert verification.chosen_check.score == min(scores)
+    for c in verification.candidates:
+        assert c.failure is None and set(c.ratio) == set(pl.FREE)
+        assert c.cond == pytest.approx(c.predicted_cond, rel=0.05)
+        assert c.score >= c.cond / min(9, 0.6 * verification.default_cond) - 1e-12
+    data = verification.to_dict()
+    json.dumps(data)
+    assert {"seeds", "chosen_rank", "chosen_start", "score", "cond_bar", "default", "candidates",
+            "warnings"} <= set(data)
+    cand = data["candidates"][0]
+    assert set(cand["measured"]) >= {"cond", "ratio", "ratio_max", "worst_ratio", "max_error_percent"}
+    assert set(cand["predicted"]) >= {"cond", "ratio"}
+    with pytest.raises(IndexError):
+        two_candidates.choose(2)
+
+
+def test_cli_plan_verify_json(tmp_path):
+    out = tmp_path / "plan.yaml"
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--starts", "2", "--verify", "1", "--out", str(out),
+                                   "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    ver = data["verification"]
+    assert ver["seeds"] == [pc.VERIFY_SEED0] and len(ver["candidates"]) == 2
+    assert ver["chosen_start"] == data["chosen_start"]
+    chosen = next(c for c in ver["candidates"] if c["rank"] == ver["chosen_rank"])
+    assert data["cond"] == pytest.approx(chosen["predicted"]["cond"])
+    assert math.isfinite(chosen["measured"]["cond"]) and data["default"]["cond"] > data["cond"]
+    off = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--starts", "1", "--verify", "0", "--out", str(out),
+                                   "--json"])
+    assert off.exit_code == 0, off.output
+    assert json.loads(off.output)["verification"] is None
+
+
+def _imports(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+    return names
+
+
+def test_layering_the_planner_does_not_import_the_check_nor_the_simulation():
+    higher = ("agvdyn.simulation", "agvdyn.identification", "agvdyn.io", "agvdyn.signals", "agvdyn.validation",
+              "agvdyn.plan_check", "agvdyn.report", "agvdyn.cli")
+    files = sorted((SRC / "trajectories").rglob("*.py"))
+    assert len(files) > 5
+    for path in files:
+        bad = {m for m in _imports(path) if m.startswith(higher)}
+        assert not bad, f"{path.relative_to(SRC)} imports {bad}"
+    check = {m for m in _imports(SRC / "plan_check.py") if m.startswith("agvdyn.")}
+    assert not {m for m in check if m.startswith(("agvdyn.report", "agvdyn.cli"))}
+
+
+def test_verification_warns_when_the_chosen_plan_misses_a_bar(monkeypatch, two_candidates):
+    _fake_runs(monkeypatch, two_candidates, (1.2, 1.3))
+    _, verification = pc.verify_plan(two_candidates, (7,))
+    assert verification.chosen == 0
+    assert len(verification.warnings) == 2 and "m_ch (1.20x)" in verification.warnings[0]
+    assert "--seed" in verification.warnings[-1]
