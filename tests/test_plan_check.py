@@ -149,3 +149,21 @@ def test_verification_warns_when_the_chosen_plan_misses_a_bar(monkeypatch, two_c
     assert verification.chosen == 0
     assert len(verification.warnings) == 2 and "m_ch (1.20x)" in verification.warnings[0]
     assert "--seed" in verification.warnings[-1]
+
+
+def test_a_refused_candidate_is_a_failure_not_an_error(monkeypatch, two_candidates):
+    _fake_runs(monkeypatch, two_candidates, (0.7, 0.9))
+    fake = pc._run
+
+    def run(trajectory, plan, seed, settings):
+        if trajectory is two_candidates.candidates[0].trajectory and seed == 8:
+            raise ValueError("weakly excited data: C_r")
+        return fake(trajectory, plan, seed, settings)
+
+    monkeypatch.setattr(pc, "_run", run)
+    chosen, verification = pc.verify_plan(two_candidates, (7, 8))
+    failed = verification.candidates[0]
+    assert failed.failure == "ValueError: weakly excited data: C_r" and math.isinf(failed.score)
+    assert verification.chosen == 1 and chosen.trajectory is two_candidates.candidates[1].trajectory
+    data = json.loads(json.dumps(verification.to_dict(), allow_nan=False))  # strict JSON: null, not Infinity
+    assert data["candidates"][0]["score"] is None and data["candidates"][0]["measured"]["cond"] is None

@@ -79,15 +79,24 @@ class CandidateCheck:
         return max(self.ratio, key=self.ratio.get) if self.ratio else ""
 
     def to_dict(self) -> dict[str, Any]:
-        return {"rank": self.rank, "start": self.start, "objective_value": self.objective_value,
-                "predicted": {"cond": self.predicted_cond, "ratio": dict(self.predicted_ratio),
-                              "worst_ratio": max(self.predicted_ratio.values())},
-                "measured": {"cond": self.cond, "ratio": dict(self.ratio), "ratio_max": dict(self.ratio_max),
-                             "worst": self.worst, "worst_ratio": self.ratio.get(self.worst, math.inf),
-                             "error_percent": dict(self.error),
-                             "max_error_percent": max(self.error.values(), default=math.inf),
-                             "error_share": self.error_share},
-                "score": self.score, "failure": self.failure}
+        """JSON-ready; what could not be measured (a failure) is null."""
+        return {"rank": self.rank, "start": self.start, "objective_value": _num(self.objective_value),
+                "predicted": {"cond": _num(self.predicted_cond), "ratio": _nums(self.predicted_ratio),
+                              "worst_ratio": _num(max(self.predicted_ratio.values()))},
+                "measured": {"cond": _num(self.cond), "ratio": _nums(self.ratio), "ratio_max": _nums(self.ratio_max),
+                             "worst": self.worst or None, "worst_ratio": _num(self.ratio.get(self.worst, math.inf)),
+                             "error_percent": _nums(self.error),
+                             "max_error_percent": _num(max(self.error.values(), default=math.inf)),
+                             "error_share": _num(self.error_share)},
+                "score": _num(self.score), "failure": self.failure}
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _nums(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: _num(v) for k, v in d.items()}
 
 
 @dataclass(frozen=True)
@@ -132,7 +141,7 @@ class Verification:
     def to_dict(self) -> dict[str, Any]:
         chosen = self.chosen_check
         return {"seeds": list(self.seeds), "chosen_rank": self.chosen, "chosen_start": chosen.start,
-                "score": chosen.score, "cond_bar": _cond_bar(self.default_cond), "warnings": list(self.warnings),
+                "score": _num(chosen.score), "cond_bar": _cond_bar(self.default_cond), "warnings": list(self.warnings),
                 "default": {"cond": self.default_cond, "std": dict(self.default_std)},
                 "candidates": [c.to_dict() for c in self.candidates], "elapsed_s": self.elapsed}
 
