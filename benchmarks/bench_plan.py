@@ -16,7 +16,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA
 
 import time  # noqa: E402
 
-from agvdyn.cli.plan_commands import VERIFY_DEFAULT  # noqa: E402
+from agvdyn.cli.plan_commands import VERIFY_CANDIDATES, VERIFY_DEFAULT  # noqa: E402
 from agvdyn.plan_check import verify_plan  # noqa: E402
 from agvdyn.platform import PROTOTYPE  # noqa: E402
 from agvdyn.trajectories.planner import PlanSettings, plan  # noqa: E402
@@ -25,7 +25,8 @@ TARGET = 60.0
 
 
 def main() -> None:
-    settings = PlanSettings(candidates=PlanSettings().starts if VERIFY_DEFAULT > 0 else 1)  # as agvdyn plan
+    starts = PlanSettings().starts
+    settings = PlanSettings(candidates=min(starts, VERIFY_CANDIDATES) if VERIFY_DEFAULT > 0 else 1)  # as agvdyn plan
     worst = 0.0
     for floor in ("5.2x1.6", "3x2"):
         t0 = time.perf_counter()
