@@ -61,3 +61,18 @@ def test_a_log_reads_its_sidecar_on_demand(tmp_path):
     (tmp_path / "run.parquet.yaml").write_text("[1, 2]\n")  # not a mapping: refused when read
     with pytest.raises(LogError, match="mapping at the top level"):
         read_log(path)
+
+
+def test_an_entry_parsed_for_one_log_is_shared_but_not_mutable_through_another(tmp_path):
+    """The parse of an entry's text is kept for the next sidecar with the same text; a mapping
+    handed out is a copy, so changing it changes neither the other sidecar nor the next get."""
+    one, two = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    one.write_text(PLAIN)
+    two.write_text(PLAIN.replace("source: agvdyn.simulation", "source: another"))
+    first, second = sidecar_text(one), sidecar_text(two)
+    platform = first.get("platform")
+    platform["l"] = -1.0
+    platform["added"] = True
+    assert second.get("platform") == yaml.safe_load(PLAIN)["platform"]
+    assert first.get("platform") == yaml.safe_load(PLAIN)["platform"]
+    assert first.get("source") == "agvdyn.simulation" and second.get("source") == "another"

@@ -14,6 +14,7 @@ no single residual (``ols``, ``wls``, ``bounded``) solve on them the same proble
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
@@ -124,8 +125,18 @@ def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None,
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqrf failed (info={info}) on a ({a.shape[0]}, {a.shape[1]}) block of rows")
     k = min(a.shape)
-    R[:k, cols] = np.triu(qr[:k])
+    upper = qr[:k]
+    upper[_below_diagonal(k, cols.size)] = 0.0
+    R[:k, cols] = upper
     return R
+
+
+@functools.lru_cache(maxsize=64)
+def _below_diagonal(rows: int, columns: int) -> np.ndarray:
+    """Mask of the entries below the diagonal of a (rows, columns) array (np.triu's zeros, cached)."""
+    mask = np.tri(rows, columns, -1, dtype=bool)
+    mask.flags.writeable = False
+    return mask
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,7 +167,8 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
     groups: dict[str, int] = {}
     plan, per_key = [], []
     for b in blocks:
-        counts = np.count_nonzero(b.keep, axis=0)
+        # column by column: count_nonzero(axis=0) of a strided (m, 2) bool view is ~17x slower
+        counts = np.array([np.count_nonzero(b.keep[:, j]) for j in range(b.keep.shape[1])])
         if not counts.any():
             continue
         key = np.full(len(b.coordinates), -1, dtype=np.int16)
