@@ -167,3 +167,70 @@ def test_a_refused_candidate_is_a_failure_not_an_error(monkeypatch, two_candidat
     assert verification.chosen == 1 and chosen.trajectory is two_candidates.candidates[1].trajectory
     data = json.loads(json.dumps(verification.to_dict(), allow_nan=False))  # strict JSON: null, not Infinity
     assert data["candidates"][0]["score"] is None and data["candidates"][0]["measured"]["cond"] is None
+
+
+def test_plant_variants_scale_the_tyres_of_the_given_plant():
+    from agvdyn.simulation import PlantSettings
+
+    base = PlantSettings()
+    soft, stiff = pc.plant_variant(base, "soft"), pc.plant_variant(base, "stiff")
+    assert (soft.slip_stiffness_long, soft.slip_stiffness_lat, soft.mu) == pytest.approx((2.5e4, 2.0e4, 0.7))
+    assert (stiff.slip_stiffness_long, stiff.slip_stiffness_lat, stiff.mu) == pytest.approx((1.6e5, 1.2e5, 1.0))
+    assert pc.plant_variant(base, "breakaway").breakaway_ratio == 1.3
+    assert pc.plant_variant(base, "radii").wheel_radius_error != base.wheel_radius_error
+    assert pc.plant_variant(base, pc.NOMINAL) is base
+    other = PlantSettings(slip_stiffness_long=8e4)
+    assert pc.plant_variant(other, "soft").slip_stiffness_long == pytest.approx(5e4)  # relative to the given plant
+    with pytest.raises(ValueError, match="plant variant"):
+        pc.plant_variant(base, "icy")
+
+
+def test_the_score_is_the_worst_over_the_plants(monkeypatch, two_candidates):
+    """Candidate 0 is better on the nominal plant and worse on soft tyres: without the variants it is kept,
+    with them candidate 1 (worst over the plants 0.8 against 1.2)."""
+    plan_ = two_candidates
+    cand = [c.trajectory for c in plan_.candidates]
+
+    def run(trajectory, plan, seed, settings):
+        soft = settings.plant.slip_stiffness_long < 4e4
+        if trajectory is plan_.reference_trajectory:
+            std = 1.0
+        elif trajectory is cand[0]:
+            std = 1.2 if soft else 0.6
+        else:
+            std = 0.8
+        return SimpleNamespace(std={n: std for n in pl.FREE}, parameters=P, condition_number=17.0 if std == 1 else 6.0)
+
+    monkeypatch.setattr(pc, "_run", run)
+    _, alone = pc.verify_plan(plan_, (7,))
+    assert alone.chosen == 0 and alone.plants == ()
+    chosen, both = pc.verify_plan(plan_, (7,), plants=("soft",), plant_seeds=(9,))
+    assert both.chosen == 1 and chosen.trajectory is cand[1]
+    first = both.candidates[0]
+    assert first.ratio["m_ch"] == pytest.approx(0.6)  # the nominal plant's figures
+    assert first.plants["soft"]["score"] == pytest.approx(1.2) and first.score == pytest.approx(1.2)
+    data = json.loads(json.dumps(both.to_dict(), allow_nan=False))
+    assert data["plants"] == [pc.NOMINAL, "soft"] and data["plant_seeds"] == [9]
+    assert data["candidates"][0]["plants"]["soft"]["score"] == pytest.approx(1.2)
+    # a chosen candidate above 1 on a variant is named in the warnings
+    monkeypatch.setattr(pc, "_run", lambda t, p, s, st: run(cand[0] if t is cand[1] else t, p, s, st))
+    _, worse = pc.verify_plan(plan_, (7,), plants=("soft",), plant_seeds=(9,))
+    assert any("soft plant variant" in w for w in worse.warnings)
+
+
+def test_verify_plan_in_two_processes_gives_the_same_figures(two_candidates):
+    """Real runs on one seed, the nominal plant and stiff tyres: two worker processes give what one does."""
+    kw = dict(plants=("stiff",), plant_seeds=(pc.VERIFY_SEED0,), candidates=1)
+    _, one = pc.verify_plan(two_candidates, 1, **kw)
+    _, two = pc.verify_plan(two_candidates, 1, workers=2, **kw)
+    assert one.chosen == two.chosen
+    for a, b in zip(one.candidates, two.candidates):
+        assert a.score == pytest.approx(b.score, rel=1e-9) and a.ratio == pytest.approx(b.ratio, rel=1e-9)
+        assert a.plants["stiff"]["cond"] == pytest.approx(b.plants["stiff"]["cond"], rel=1e-9)
+    assert two.chosen_check.plants["stiff"]["cond"] == pytest.approx(two.chosen_check.cond, rel=0.05)
+
+
+def test_cli_plan_rejects_an_unknown_plant_variant(tmp_path):
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--verify-plants", "soft,icy", "--out",
+                                   str(tmp_path / "p.yaml")])
+    assert res.exit_code == 2 and "icy" in res.output

@@ -18,26 +18,36 @@ predicted ones (``agvdyn plan --verify``). Measured on two vehicles and four pla
 (docs/planning.md, "Stop 22"): with four seeds the chosen plans were never worse than the predicted
 best on six other noise seeds, and better where the predicted best missed a bar by far.
 
+``plants`` adds plant variants (:data:`PLANT_VARIANTS`: softer or stiffer tyres, other wheel radii,
+breakaway friction) as a proxy for another engine's contact: each candidate and the default sequence
+are simulated on them too and a candidate's score is its worst over the plants. Measured on both
+vehicles (docs/planning.md, "Stop 22, second helper"), that choice was not better than the nominal
+plant's on held-out seeds and plants (the variants' scores on two to four seeds scatter more than the
+candidates differ), so it is opt-in (``agvdyn plan --verify-plants soft,stiff``): it reports how the
+plan holds on those plants. The runs can go to worker processes (``workers``; ``agvdyn plan``: two).
+
 This is the validation stage: it imports the simulation and the identification, which the
 planner (a trajectories module) must not.
 """
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 import time
-from dataclasses import dataclass
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from agvdyn.identification import Identification, identify
 from agvdyn.io import Log
-from agvdyn.simulation import SimulationSettings, simulate
+from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
 from agvdyn.trajectories.planner import FREE, Plan
 from agvdyn.trajectories.planner.optimize import COND_BAR, COND_SHARE
 
 __all__ = ["CandidateCheck", "Verification", "verify_plan", "measured_score", "choose", "VERIFY_SEED0",
-           "PREFER_PREDICTED"]
+           "PREFER_PREDICTED", "PLANT_VARIANTS", "plant_variant"]
 
 #: First noise seed of the verification runs (seeds ``VERIFY_SEED0 ... + n - 1``): apart from the
 #: seeds a user simulates by default (0) and from those the acceptance is measured on (0-8).
@@ -48,6 +58,20 @@ VERIFY_SEED0 = 100
 PREFER_PREDICTED = 0.05
 #: Relative tolerance of a parameter's error (issue 11: within 5 % or 3 std of the truth).
 ERROR_TOLERANCE = 0.05
+#: Name of the plant of the settings as given.
+NOMINAL = "nominal"
+#: Plant variants of the check (``verify_plan(plants=...)``, ``agvdyn plan --verify-plants``), a proxy for
+#: another engine's contact: a value, or a function of the plant's own. ``soft``/``stiff``: tyre slip
+#: stiffness (longitudinal x0.625 / x4, lateral x2/3 / x4; the default plant's 4e4 / 3e4 N become
+#: 2.5e4 / 2e4 and 1.6e5 / 1.2e5) and friction coefficient (x0.875 / x1.25: 0.7 / 1.0);
+#: ``radii``: other wheel-radius errors; ``breakaway``: static friction 1.3x the sliding one.
+PLANT_VARIANTS: dict[str, dict[str, Any]] = {
+    "soft": {"slip_stiffness_long": lambda v: 0.625 * v, "slip_stiffness_lat": lambda v: v * 2 / 3,
+             "mu": lambda v: 0.875 * v},
+    "stiff": {"slip_stiffness_long": lambda v: 4 * v, "slip_stiffness_lat": lambda v: 4 * v, "mu": lambda v: 1.25 * v},
+    "radii": {"wheel_radius_error": (-0.003, 0.002, 0.0025, -0.001)},
+    "breakaway": {"breakaway_ratio": 1.3, "stribeck_velocity": 0.02},
+}
 
 
 @dataclass(frozen=True)
@@ -72,6 +96,7 @@ class CandidateCheck:
     error_share: float
     score: float
     failure: str | None = None
+    plants: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def worst(self) -> str:
@@ -88,7 +113,10 @@ class CandidateCheck:
                              "error_percent": _nums(self.error),
                              "max_error_percent": _num(max(self.error.values(), default=math.inf)),
                              "error_share": _num(self.error_share)},
-                "score": _num(self.score), "failure": self.failure}
+                "score": _num(self.score), "failure": self.failure,
+                "plants": {p: {"score": _num(m["score"]), "cond": _num(m["cond"]), "default_cond": m["default_cond"],
+                               "ratio": _nums(m["ratio"]), "max_error_percent": _num(max(m["error"].values())),
+                               "error_share": _num(m["error_share"])} for p, m in self.plants.items()}}
 
 
 def _num(x: float) -> float | None:
@@ -110,6 +138,8 @@ class Verification:
     default_cond: float
     default_std: dict[str, float]
     elapsed: float
+    plants: tuple[str, ...] = ()
+    plant_seeds: tuple[int, ...] = ()
 
     @property
     def chosen_check(self) -> CandidateCheck:
@@ -134,6 +164,11 @@ class Verification:
         if c.error_share > 1:
             n = max(c.error, key=c.error.get)
             out.append(f"measured on the simulator: an error beyond 5 % and 3 std (largest {n} {c.error[n]:.1f} %)")
+        for p, m in c.plants.items():
+            if m["score"] > 1:
+                w = max(m["ratio"], key=m["ratio"].get)
+                out.append(f"measured on the {p} plant variant: score {m['score']:.2f} (cond {m['cond']:.2f}, "
+                           f"{w} std {m['ratio'][w]:.2f}x the default's, largest error {max(m['error'].values()):.1f} %)")
         if out:
             out.append("plan again with another --seed or more --starts, or a longer --duration")
         return tuple(out)
@@ -143,7 +178,8 @@ class Verification:
         return {"seeds": list(self.seeds), "chosen_rank": self.chosen, "chosen_start": chosen.start,
                 "score": _num(chosen.score), "cond_bar": _cond_bar(self.default_cond), "warnings": list(self.warnings),
                 "default": {"cond": self.default_cond, "std": dict(self.default_std)},
-                "candidates": [c.to_dict() for c in self.candidates], "elapsed_s": self.elapsed}
+                "candidates": [c.to_dict() for c in self.candidates], "elapsed_s": self.elapsed,
+                "plants": [NOMINAL, *self.plants], "plant_seeds": list(self.plant_seeds)}
 
 
 def _cond_bar(default_cond: float) -> float:
@@ -155,6 +191,19 @@ def measured_score(ratio: dict[str, float], cond: float, default_cond: float, er
     return float(max(max(ratio.values(), default=math.inf), cond / _cond_bar(default_cond), error_share))
 
 
+def plant_variant(plant: PlantSettings, name: str) -> PlantSettings:
+    """``plant`` with the tyres or wheel radii of the variant ``name`` (:data:`PLANT_VARIANTS`): scaled
+    tyre stiffness and friction, or other wheel-radius errors."""
+    if name == NOMINAL:
+        return plant
+    try:
+        change = PLANT_VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"plant variant {name!r}: expected one of {[NOMINAL, *PLANT_VARIANTS]}") from None
+    values = {k: (v(getattr(plant, k)) if callable(v) else v) for k, v in change.items()}
+    return replace(plant, **values)
+
+
 def _run(trajectory, plan: Plan, seed: int, settings: SimulationSettings) -> Identification:
     """Simulate ``trajectory`` with the plan's nominal parameters on ``seed`` and identify it (the defaults
     of ``agvdyn identify``, B_w fixed at its nominal value)."""
@@ -164,51 +213,119 @@ def _run(trajectory, plan: Plan, seed: int, settings: SimulationSettings) -> Ide
     return identify(log, geom, fixed={"B_w": plan.params.B_w}, keep_blocks=False, workers=1)
 
 
+def _summary(ident) -> tuple[dict[str, float], dict[str, float], float]:
+    return ({n: float(ident.std[n]) for n in FREE}, {n: float(getattr(ident.parameters, n)) for n in FREE},
+            float(ident.condition_number))
+
+
+#: What the worker processes of :func:`verify_plan` inherit (forked): the trajectories, the plan, the settings.
+_SHARED: dict[str, Any] = {}
+
+
+def _task(key):
+    """One simulation and identification in a worker process: the summary, or the exception's text."""
+    i, p, seed = key
+    try:
+        return _summary(_run(_SHARED["trajs"][i], _SHARED["plan"], seed, _SHARED["sims"][p]))
+    except Exception as exc:  # noqa: BLE001 - reported by the caller
+        return f"{type(exc).__name__}: {exc}"
+
+
+def _measure(plan: Plan, cand, runs, default, params) -> dict[str, Any]:
+    """A candidate's figures on one plant: ``runs`` and ``default`` are summaries on the same seeds."""
+    ratios = np.array([[r[0][n] / d[0][n] for n in FREE] for r, d in zip(runs, default)])
+    truth = np.array([getattr(params, n) for n in FREE])
+    values = np.array([[r[1][n] for n in FREE] for r in runs])
+    stds = np.array([[r[0][n] for n in FREE] for r in runs])
+    err = np.abs(values - truth)
+    share = float(np.max(err / np.maximum(ERROR_TOLERANCE * np.abs(truth), 3 * stds)))
+    default_cond = float(np.mean([d[2] for d in default]))
+    ratio = dict(zip(FREE, ratios.mean(0).tolist()))
+    cond = float(np.mean([r[2] for r in runs]))
+    return {"cond": cond, "ratio": ratio, "ratio_max": dict(zip(FREE, ratios.max(0).tolist())),
+            "error": dict(zip(FREE, (100 * err.max(0) / np.abs(truth)).tolist())), "error_share": share,
+            "default_cond": default_cond, "score": measured_score(ratio, cond, default_cond, share)}
+
+
 def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int | None = None,
                 settings: SimulationSettings = SimulationSettings(),
-                prefer_predicted: float = PREFER_PREDICTED) -> tuple[Plan, Verification]:
+                prefer_predicted: float = PREFER_PREDICTED, plants: tuple[str, ...] = (),
+                plant_seeds: int | tuple[int, ...] = 2, workers: int = 1) -> tuple[Plan, Verification]:
     """Simulate and identify the plan's best ``candidates`` (default: all it kept,
     ``PlanSettings.candidates``) and the default sequence in the same floor on ``seeds`` (an int n:
     seeds ``VERIFY_SEED0 ... + n - 1``); return the plan with the candidate :func:`choose` takes
     and the :class:`Verification`.
 
+    ``plants``: names of :data:`PLANT_VARIANTS` on which every candidate and the default sequence are
+    simulated too (on ``plant_seeds``, an int n: seeds ``VERIFY_SEED0 ... + n - 1``), as a proxy for
+    another engine's tyres and wheels; a candidate's score is then the largest of its scores on the
+    nominal plant and on each variant (each against the default sequence on the same plant and seeds).
+    ``workers`` > 1: the runs in that many processes.
+
     About 0.2-0.5 s per simulation and identification on the project's machine (117.6 s at 2 ms).
     """
     t0 = time.perf_counter()
-    seeds = tuple(range(VERIFY_SEED0, VERIFY_SEED0 + int(seeds))) if isinstance(seeds, int) else tuple(seeds)
+    seeds = _seeds(seeds)
     if not seeds:
         raise ValueError("verify_plan: expected at least one seed")
     pool = plan.candidates[:candidates] if candidates is not None else plan.candidates
     if not pool:
         raise ValueError("verify_plan: the plan keeps no candidates (PlanSettings.candidates >= 1)")
-    params = plan.params
-    default = [_run(plan.reference_trajectory, plan, s, settings) for s in seeds]
-    default_cond = float(np.mean([d.condition_number for d in default]))
-    default_std = {n: float(np.mean([d.std[n] for d in default])) for n in FREE}
-    checks = []
-    for cand in pool:
-        predicted = {n: cand.evaluation.std[n] / plan.reference.std[n] for n in FREE}
+    plants = tuple(p for p in plants if p != NOMINAL)
+    variant_seeds = _seeds(plant_seeds) if plants else ()
+    if plants and not variant_seeds:
+        raise ValueError("verify_plan: expected at least one seed on the plant variants")
+    sims = {NOMINAL: settings, **{p: replace(settings, plant=plant_variant(settings.plant, p)) for p in plants}}
+    on = {NOMINAL: seeds, **{p: variant_seeds for p in plants}}
+    trajs = [plan.reference_trajectory] + [c.trajectory for c in pool]
+    tasks = [(i, p, s) for p in sims for s in on[p] for i in range(len(trajs))]
+    if workers > 1 and "fork" in mp.get_all_start_methods():
+        _SHARED.update(trajs=trajs, plan=plan, sims=sims)
         try:
-            runs = [_run(cand.trajectory, plan, s, settings) for s in seeds]
-        except Exception as exc:  # noqa: BLE001 - a refused identification is a measured outcome
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as ex:
+                out = list(ex.map(_task, tasks))
+        finally:
+            _SHARED.clear()
+    else:
+        out = []
+        for i, p, s in tasks:
+            try:
+                out.append(_summary(_run(trajs[i], plan, s, sims[p])))
+            except Exception as exc:  # noqa: BLE001 - a refused identification is a measured outcome
+                if i == 0:
+                    raise
+                out.append(f"{type(exc).__name__}: {exc}")
+    results = dict(zip(tasks, out))
+    for (i, p, s), r in results.items():
+        if i == 0 and isinstance(r, str):
+            raise RuntimeError(f"the default sequence on the {p} plant, seed {s}: {r}")
+    params = plan.params
+    default = {p: [results[(0, p, s)] for s in on[p]] for p in sims}
+    default_cond = float(np.mean([d[2] for d in default[NOMINAL]]))
+    default_std = {n: float(np.mean([d[0][n] for d in default[NOMINAL]])) for n in FREE}
+    checks = []
+    for j, cand in enumerate(pool, start=1):
+        predicted = {n: cand.evaluation.std[n] / plan.reference.std[n] for n in FREE}
+        runs = {p: [results[(j, p, s)] for s in on[p]] for p in sims}
+        failed = next((r for p in sims for r in runs[p] if isinstance(r, str)), None)
+        if failed is not None:
             checks.append(CandidateCheck(cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted,
-                                         math.inf, {}, {}, {}, math.inf, math.inf, f"{type(exc).__name__}: {exc}"))
+                                         math.inf, {}, {}, {}, math.inf, math.inf, failed))
             continue
-        ratios = np.array([[r.std[n] / d.std[n] for n in FREE] for r, d in zip(runs, default)])
-        truth = np.array([getattr(params, n) for n in FREE])
-        values = np.array([[getattr(r.parameters, n) for n in FREE] for r in runs])
-        stds = np.array([[r.std[n] for n in FREE] for r in runs])
-        err = np.abs(values - truth)
-        share = float(np.max(err / np.maximum(ERROR_TOLERANCE * np.abs(truth), 3 * stds)))
-        ratio = dict(zip(FREE, ratios.mean(0).tolist()))
-        cond = float(np.mean([r.condition_number for r in runs]))
+        m = {p: _measure(plan, cand, runs[p], default[p], params) for p in sims}
+        nom = m[NOMINAL]
         checks.append(CandidateCheck(
-            cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted, cond, ratio,
-            dict(zip(FREE, ratios.max(0).tolist())), dict(zip(FREE, (100 * err.max(0) / np.abs(truth)).tolist())),
-            share, measured_score(ratio, cond, default_cond, share)))
+            cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted, nom["cond"], nom["ratio"],
+            nom["ratio_max"], nom["error"], nom["error_share"], max(x["score"] for x in m.values()),
+            plants={p: m[p] for p in plants}))
     chosen = choose(checks, prefer_predicted)
-    verification = Verification(seeds, tuple(checks), chosen, default_cond, default_std, time.perf_counter() - t0)
+    verification = Verification(seeds, tuple(checks), chosen, default_cond, default_std, time.perf_counter() - t0,
+                                plants, variant_seeds)
     return plan.choose(chosen), verification
+
+
+def _seeds(seeds: int | tuple[int, ...]) -> tuple[int, ...]:
+    return tuple(range(VERIFY_SEED0, VERIFY_SEED0 + int(seeds))) if isinstance(seeds, int) else tuple(seeds)
 
 
 def choose(checks, prefer_predicted: float = PREFER_PREDICTED) -> int:

@@ -17,6 +17,11 @@ VERIFY_DEFAULT = 4
 #: The check simulates at most this many starts, best predicted objective first (~1.5 s each with four
 #: seeds, the build included); with the default six starts, all of them.
 VERIFY_CANDIDATES = 6
+#: Default of ``--verify-plants``: plant variants (``agvdyn.plan_check.PLANT_VARIANTS``) every candidate is
+#: also simulated on (docs/planning.md, "Stop 22, second helper").
+VERIFY_PLANTS: tuple[str, ...] = ()
+#: Noise seeds per plant variant.
+VERIFY_PLANT_SEEDS = 2
 
 
 @app.command()
@@ -40,6 +45,11 @@ def plan(
                                "simulator: the best starts (at most six) and the default sequence are simulated and identified "
                                "(identify's defaults) on seeds 100, 101, ... and the candidate furthest inside the "
                                "bars (std ratios, cond, errors) is kept; 0: off (the best predicted objective)."),
+    verify_plants: str = typer.Option(",".join(VERIFY_PLANTS) or "none", "--verify-plants",
+                                      help="Plant variants the check also simulates every candidate and the default "
+                                      "sequence on (two seeds each), comma-separated: soft, stiff (tyres), radii (wheel "
+                                      "radii), breakaway (static friction 1.3x); a candidate's score is its worst over "
+                                      "the plants; none: the nominal plant alone."),
     figure: Optional[Path] = typer.Option(None, help="Also save the floor, path and predicted stds as a figure "
                                           "(.png, .svg or .pdf)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -61,6 +71,7 @@ def plan(
         plan_settings = PlanSettings(objective=objective, starts=starts, seed=seed,
                                      candidates=min(starts, VERIFY_CANDIDATES) if verify > 0 else 1)
         rectangle = parse_floor(floor)
+        plants = _plants(verify_plants)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     limits = sim.limits
@@ -74,10 +85,13 @@ def plan(
         raise fail(str(exc)) from exc
     verification = None
     if verify > 0:
+        import os
+
         from agvdyn.plan_check import verify_plan
 
         try:
-            result, verification = verify_plan(result, verify, settings=sim)
+            result, verification = verify_plan(result, verify, settings=sim, plants=plants,
+                                               plant_seeds=VERIFY_PLANT_SEEDS, workers=min(2, os.cpu_count() or 1))
         except Exception as exc:  # noqa: BLE001 - the default sequence not identified, a limit broken, ...
             raise fail(f"--verify: the check on the simulator failed ({type(exc).__name__}: {exc}); "
                        "plan with --verify 0 to skip it") from exc
@@ -128,20 +142,36 @@ def plan(
         console.print(f"[yellow]warning:[/yellow] {warning}", highlight=False)
 
 
+def _plants(text: str) -> tuple[str, ...]:
+    """``--verify-plants``: names of plant variants, or none."""
+    from agvdyn.plan_check import NOMINAL, PLANT_VARIANTS
+
+    names = tuple(n.strip() for n in text.split(",") if n.strip() and n.strip().lower() != "none")
+    bad = [n for n in names if n not in PLANT_VARIANTS and n != NOMINAL]
+    if bad:
+        raise ValueError(f"--verify-plants {text}: unknown {', '.join(bad)}; expected none or some of "
+                         f"{', '.join(PLANT_VARIANTS)}")
+    return tuple(n for n in names if n != NOMINAL)
+
+
 def _print_verification(console: Console, verification) -> None:
     """The candidates measured on the simulator next to their prediction (``--verify``)."""
     seeds = verification.seeds
     on = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]} (means)"
     table = Table(title=f"Candidates simulated and identified on {on}, std ratios "
                         f"to the default sequence (cond {verification.default_cond:.2f}); score <= 1 meets the bars")
-    for col in ("start", "predicted objective", "predicted cond", "cond", "predicted worst ratio", "worst ratio",
-                "max error %", "score", ""):
+    columns = ["start", "predicted objective", "predicted cond", "cond", "predicted worst ratio", "worst ratio",
+               "max error %"]
+    if verification.plants:
+        columns.append(f"score on {', '.join(verification.plants)} (seeds {', '.join(map(str, verification.plant_seeds))})")
+    for col in (*columns, "score", ""):
         table.add_column(col, justify="right")
     for c in verification.candidates:
         pw = max(c.predicted_ratio, key=c.predicted_ratio.get)
         measured = (f"{c.ratio[c.worst]:.2f} ({c.worst})" if c.failure is None else c.failure[:40])
-        table.add_row(str(c.start), f"{c.objective_value:.3g}", f"{c.predicted_cond:.2f}", f"{c.cond:.2f}",
-                      f"{c.predicted_ratio[pw]:.2f} ({pw})", measured,
-                      f"{max(c.error.values(), default=float('nan')):.1f}",
-                      f"{c.score:.3f}", "chosen" if c.rank == verification.chosen else "")
+        row = [str(c.start), f"{c.objective_value:.3g}", f"{c.predicted_cond:.2f}", f"{c.cond:.2f}",
+               f"{c.predicted_ratio[pw]:.2f} ({pw})", measured, f"{max(c.error.values(), default=float('nan')):.1f}"]
+        if verification.plants:
+            row.append(", ".join(f"{c.plants[p]['score']:.3f}" if p in c.plants else "-" for p in verification.plants))
+        table.add_row(*row, f"{c.score:.3f}", "chosen" if c.rank == verification.chosen else "")
     console.print(table)
