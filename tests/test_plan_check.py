@@ -234,3 +234,33 @@ def test_cli_plan_rejects_an_unknown_plant_variant(tmp_path):
     res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--verify-plants", "soft,icy", "--out",
                                    str(tmp_path / "p.yaml")])
     assert res.exit_code == 2 and "icy" in res.output
+
+
+def test_search_presets_and_their_errors():
+    assert pl.PlanSettings.search("narrow") == pl.PlanSettings()
+    wide = pl.PlanSettings.search("wide", seed=3)
+    assert (wide.starts, wide.peak_exponent, wide.explore_iterations, wide.refine, wide.seed) == (12, 64.0, 80, 4, 3)
+    with pytest.raises(ValueError, match="search 'deep'"):
+        pl.PlanSettings.search("deep")
+
+
+def test_combine_keeps_the_first_plans_best_start_and_labels_the_searches(two_candidates):
+    other = pl.plan(PROTOTYPE, "3x2", settings=pl.PlanSettings.search("wide", starts=1, workers=1, max_iterations=20,
+                                                                        candidates=1))
+    both = pl.combine([two_candidates, other], ["narrow", "wide"])
+    assert [c.rank for c in both.candidates] == [0, 1, 2]
+    assert [c.search for c in both.candidates] == ["narrow", "narrow", "wide"]
+    assert both.chosen == 0 and both.trajectory is two_candidates.candidates[0].trajectory
+    assert both.candidates[2].trajectory is other.candidates[0].trajectory
+    assert len(both.starts) == 3 and {s["search"] for s in both.starts} == {"narrow", "wide"}
+    assert both.to_dict()["chosen_search"] == "narrow" and both.choose(2).to_dict()["chosen_search"] == "wide"
+    with pytest.raises(ValueError, match="one search name per plan"):
+        pl.combine([two_candidates, other], ["narrow"])
+    small_floor = pl.plan(PROTOTYPE, "3.2x2", settings=pl.PlanSettings(starts=1, workers=1, max_iterations=5))
+    with pytest.raises(ValueError, match="differ"):
+        pl.combine([two_candidates, small_floor], ["a", "b"])
+
+
+def test_cli_plan_rejects_an_unknown_search(tmp_path):
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--search", "narrow,deep", "--out", str(tmp_path / "p.yaml")])
+    assert res.exit_code == 2 and "deep" in res.output

@@ -97,6 +97,7 @@ class CandidateCheck:
     score: float
     failure: str | None = None
     plants: dict[str, dict[str, Any]] = field(default_factory=dict)
+    search: str = ""
 
     @property
     def worst(self) -> str:
@@ -105,7 +106,8 @@ class CandidateCheck:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready; what could not be measured (a failure) is null."""
-        return {"rank": self.rank, "start": self.start, "objective_value": _num(self.objective_value),
+        return {"rank": self.rank, "start": self.start, "search": self.search or None,
+                "objective_value": _num(self.objective_value),
                 "predicted": {"cond": _num(self.predicted_cond), "ratio": _nums(self.predicted_ratio),
                               "worst_ratio": _num(max(self.predicted_ratio.values()))},
                 "measured": {"cond": _num(self.cond), "ratio": _nums(self.ratio), "ratio_max": _nums(self.ratio_max),
@@ -170,12 +172,13 @@ class Verification:
                 out.append(f"measured on the {p} plant variant: score {m['score']:.2f} (cond {m['cond']:.2f}, "
                            f"{w} std {m['ratio'][w]:.2f}x the default's, largest error {max(m['error'].values()):.1f} %)")
         if out:
-            out.append("plan again with another --seed or more --starts, or a longer --duration")
+            out.append("plan again with --search wide (measured better on average on two vehicles, docs/planning.md), "
+                       "another --seed or more --starts, or a longer --duration")
         return tuple(out)
 
     def to_dict(self) -> dict[str, Any]:
         chosen = self.chosen_check
-        return {"seeds": list(self.seeds), "chosen_rank": self.chosen, "chosen_start": chosen.start,
+        return {"seeds": list(self.seeds), "chosen_rank": self.chosen, "chosen_start": chosen.start, "chosen_search": chosen.search or None,
                 "score": _num(chosen.score), "cond_bar": _cond_bar(self.default_cond), "warnings": list(self.warnings),
                 "default": {"cond": self.default_cond, "std": dict(self.default_std)},
                 "candidates": [c.to_dict() for c in self.candidates], "elapsed_s": self.elapsed,
@@ -310,14 +313,14 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
         failed = next((r for p in sims for r in runs[p] if isinstance(r, str)), None)
         if failed is not None:
             checks.append(CandidateCheck(cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted,
-                                         math.inf, {}, {}, {}, math.inf, math.inf, failed))
+                                         math.inf, {}, {}, {}, math.inf, math.inf, failed, search=cand.search))
             continue
         m = {p: _measure(plan, cand, runs[p], default[p], params) for p in sims}
         nom = m[NOMINAL]
         checks.append(CandidateCheck(
             cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted, nom["cond"], nom["ratio"],
             nom["ratio_max"], nom["error"], nom["error_share"], max(x["score"] for x in m.values()),
-            plants={p: m[p] for p in plants}))
+            plants={p: m[p] for p in plants}, search=cand.search))
     chosen = choose(checks, prefer_predicted)
     verification = Verification(seeds, tuple(checks), chosen, default_cond, default_std, time.perf_counter() - t0,
                                 plants, variant_seeds)

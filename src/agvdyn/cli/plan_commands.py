@@ -22,6 +22,8 @@ VERIFY_CANDIDATES = 6
 VERIFY_PLANTS: tuple[str, ...] = ()
 #: Noise seeds per plant variant.
 VERIFY_PLANT_SEEDS = 2
+#: Default of ``--search`` (``agvdyn.trajectories.planner.SEARCHES``).
+SEARCH_DEFAULT = "narrow"
 
 
 @app.command()
@@ -39,7 +41,12 @@ def plan(
                                           "and the relative stds; default: Table 2 with B_w = 0.121."),
     settings: Optional[Path] = typer.Option(None, help="Simulation settings (YAML) whose limits group (and the "
                                             "plant's torque_limit) bound the plan; see docs/simulation.md."),
-    starts: int = typer.Option(6, help="Random starts of the optimiser."),
+    search: str = typer.Option(SEARCH_DEFAULT, help="Search of the optimiser: narrow (six starts of 300 "
+                               "iterations, each phase scaled to its largest peak), wide (twelve starts, a smooth "
+                               "bound on the peaks, 80 iterations each and the best four on to 300), or both "
+                               "(narrow,wide: the check chooses among the best six of each; the first's best start "
+                               "unless another is measured better; with --verify 0 the first alone)."),
+    starts: Optional[int] = typer.Option(None, help="Random starts of the optimiser (default: the search's, 6 or 12)."),
     seed: int = typer.Option(0, help="Seed of the starts."),
     verify: int = typer.Option(VERIFY_DEFAULT, "--verify", min=0, help="Noise seeds per candidate for a check on the "
                                "simulator: the best starts (at most six) and the default sequence are simulated and identified "
@@ -60,7 +67,7 @@ def plan(
     from agvdyn.cli.sim_commands import _params
     from agvdyn.simulation import SimulationSettings, read_settings
     from agvdyn.trajectories import TrajectoryError
-    from agvdyn.trajectories.planner import FREE, PlanSettings, parse_floor, plan as make_plan
+    from agvdyn.trajectories.planner import FREE, SEARCHES, PlanSettings, combine, parse_floor, plan as make_plan
 
     import yaml
 
@@ -68,8 +75,17 @@ def plan(
         raise fail(f"--out {out}: unknown suffix {out.suffix!r}: expected .yaml or .yml")
     try:
         sim = SimulationSettings() if settings is None else read_settings(settings)
-        plan_settings = PlanSettings(objective=objective, starts=starts, seed=seed,
-                                     candidates=min(starts, VERIFY_CANDIDATES) if verify > 0 else 1)
+        searches = [name.strip() for name in search.split(",") if name.strip()]
+        if not searches or len(set(searches)) < len(searches):
+            raise ValueError(f"--search {search!r}: expected one or more different names of {', '.join(SEARCHES)}")
+        if verify == 0:  # without the check only the first search's best start would be used
+            searches = searches[:1]
+        plan_settings = []
+        for name in searches:
+            one = PlanSettings.search(name, objective=objective, seed=seed)
+            if starts is not None:
+                one = replace(one, starts=starts)
+            plan_settings.append(replace(one, candidates=min(one.starts, VERIFY_CANDIDATES) if verify > 0 else 1))
         rectangle = parse_floor(floor)
         plants = _plants(verify_plants)
     except ValueError as exc:
@@ -80,7 +96,9 @@ def plan(
     geom = platform_option(platform)
     nominal = _params(params)
     try:
-        result = make_plan(geom, rectangle, duration, params=nominal, limits=limits, settings=plan_settings)
+        results = [make_plan(geom, rectangle, duration, params=nominal, limits=limits, settings=one)
+                   for one in plan_settings]
+        result = results[0] if len(results) == 1 else combine(results, searches)
     except (TrajectoryError, ValueError) as exc:
         raise fail(str(exc)) from exc
     verification = None
@@ -169,7 +187,7 @@ def _print_verification(console: Console, verification) -> None:
     for c in verification.candidates:
         pw = max(c.predicted_ratio, key=c.predicted_ratio.get)
         measured = (f"{c.ratio[c.worst]:.2f} ({c.worst})" if c.failure is None else c.failure[:40])
-        row = [str(c.start), f"{c.objective_value:.3g}", f"{c.predicted_cond:.2f}", f"{c.cond:.2f}",
+        row = [f"{c.search} {c.start}".strip(), f"{c.objective_value:.3g}", f"{c.predicted_cond:.2f}", f"{c.cond:.2f}",
                f"{c.predicted_ratio[pw]:.2f} ({pw})", measured, f"{max(c.error.values(), default=float('nan')):.1f}"]
         if verification.plants:
             row.append(", ".join(f"{c.plants[p]['score']:.3f}" if p in c.plants else "-" for p in verification.plants))

@@ -44,9 +44,9 @@ sequence in the same floor (:func:`default_for_floor`).
 """
 from agvdyn.trajectories.planner.evaluation import SequenceEvaluation, default_for_floor, evaluate_sequence
 from agvdyn.trajectories.planner.figure import plan_figure
-from agvdyn.trajectories.planner.optimize import Candidate, Plan, PhaseDesign, plan
+from agvdyn.trajectories.planner.optimize import Candidate, Plan, PhaseDesign, combine, plan
 from agvdyn.trajectories.planner.problem import _phase_models, _Problem  # noqa: F401  (tests)
-from agvdyn.trajectories.planner.settings import FREE, OBJECTIVES, PHASES, NoiseLevels, PlanSettings, parse_floor
+from agvdyn.trajectories.planner.settings import FREE, OBJECTIVES, PHASES, SEARCHES, NoiseLevels, PlanSettings, parse_floor
 
-__all__ = ["Candidate", "FREE", "NoiseLevels", "PlanSettings", "PhaseDesign", "SequenceEvaluation", "Plan", "OBJECTIVES", "PHASES",
-           "plan", "evaluate_sequence", "default_for_floor", "plan_figure", "parse_floor"]
+__all__ = ["Candidate", "FREE", "NoiseLevels", "PlanSettings", "SEARCHES", "PhaseDesign", "SequenceEvaluation", "Plan", "OBJECTIVES", "PHASES",
+           "plan", "combine", "evaluate_sequence", "default_for_floor", "plan_figure", "parse_floor"]

@@ -67,6 +67,7 @@ class Candidate:
     trajectory: Trajectory
     phases: tuple[PhaseDesign, ...]
     evaluation: SequenceEvaluation
+    search: str = ""
 
 
 #: What a plan should reach (issue 11): cond(Theta_1w^T Theta_1w) at most 9 and at most 0.6x the
@@ -144,6 +145,7 @@ class Plan:
             "default": {**self.reference.to_dict(), "floor_used": self.reference.to_dict()["floor"]},
             "starts": list(self.starts),
             "chosen_start": self.candidates[self.chosen].start if self.candidates else None,
+            "chosen_search": self.candidates[self.chosen].search if self.candidates else None,
             "elapsed_s": self.elapsed,
             "platform": self.trajectory.geometry.to_dict(),
             "warnings": list(self.warnings),
@@ -176,6 +178,29 @@ class Plan:
                 {"name": "align", "to": [0.0, 0.0], **align},
             ],
         }
+
+
+def combine(plans: tuple[Plan, ...] | list[Plan], searches: tuple[str, ...] | list[str]) -> Plan:
+    """One plan whose candidates are those of ``plans`` (the same vehicle, floor and duration, planned with
+    the searches named ``searches``), in that order: the first plan's best start stays the plan and rank 0,
+    the one a check on the simulator keeps unless another is measured better
+    (:func:`agvdyn.plan_check.verify_plan`; ``agvdyn plan --search narrow,wide``). The predicted objectives
+    of different searches are not compared."""
+    if not plans or len(plans) != len(searches):
+        raise ValueError(f"combine: expected one search name per plan, got {len(plans)} plans and {len(searches)} names")
+    first = plans[0]
+    for p in plans[1:]:
+        if p.trajectory.geometry != first.trajectory.geometry or p.floor != first.floor or \
+                abs(p.reference.duration - first.reference.duration) > 1e-9:
+            raise ValueError("combine: the plans differ in vehicle, floor or duration")
+    pool = [c for p in plans for c in p.candidates]
+    names = [name for p, name in zip(plans, searches) for _ in p.candidates]
+    pool = [replace(c, rank=i, search=name) for i, (c, name) in enumerate(zip(pool, names))]
+    if not pool:
+        raise ValueError("combine: the plans keep no candidates (PlanSettings.candidates >= 1)")
+    starts = tuple({**st, "search": name} for p, name in zip(plans, searches) for st in p.starts)
+    return replace(first, starts=starts, elapsed=sum(p.elapsed for p in plans), candidates=tuple(pool),
+                   chosen=0).choose(0)
 
 
 def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:

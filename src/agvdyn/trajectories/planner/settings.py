@@ -235,6 +235,16 @@ class PlanSettings:
         if self.workers is not None and not (isinstance(self.workers, int) and self.workers >= 1):
             raise TrajectoryError(f"workers={self.workers!r}: expected an integer >= 1 or None")
 
+    @classmethod
+    def search(cls, name: str, **changes) -> "PlanSettings":
+        """The settings with the optimiser's search ``name`` of :data:`SEARCHES` (``agvdyn plan --search``),
+        then ``changes``."""
+        try:
+            preset = SEARCHES[name]
+        except KeyError:
+            raise TrajectoryError(f"search {name!r}: expected one of {list(SEARCHES)}") from None
+        return cls(**{**preset, **changes})
+
     def margins(self) -> np.ndarray:
         """``reference_margin`` of each of the ten parameters (``parameter_margins`` override it by name)."""
         out = np.full(len(FREE), float(self.reference_margin))
@@ -244,6 +254,18 @@ class PlanSettings:
 
     def threshold(self, coordinate: str) -> float:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
+
+
+#: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``narrow``: the
+#: defaults of :class:`PlanSettings` (six starts of 300 iterations, each phase scaled to its largest
+#: peak). ``wide``: twelve starts, each phase scaled to the 64-norm of its peaks (a smooth bound, so
+#: L-BFGS-B does not stop at the kinks of the max), 80 iterations each and the best four on to 300
+#: (docs/planning.md, "Stop 22, second helper": on plan seeds 0-5 of both vehicles, measured on the
+#: simulator, better than ``narrow`` with the check on average on both and on most single seeds).
+SEARCHES: dict[str, dict[str, float | int]] = {
+    "narrow": {"starts": 6, "peak_exponent": math.inf, "explore_iterations": 300, "refine": 2},
+    "wide": {"starts": 12, "peak_exponent": 64.0, "explore_iterations": 80, "refine": 4},
+}
 
 
 def parse_floor(text: str) -> FloorSpace:
