@@ -195,10 +195,12 @@ LEVERAGE_WARNING = 0.5
 MAX_LEVERAGE = 0.95
 
 
-def _largest_leverage(M: np.ndarray, trace: np.ndarray, top: float, batch: int = 16) -> float:
-    """max(top, largest eigenvalue of the blocks M (nb, p, p)), visiting blocks by decreasing trace
-    (an upper bound of a positive semi-definite block's largest eigenvalue) while it can exceed top."""
-    order = np.argsort(-trace)
+def _largest_leverage(M: np.ndarray, trace: np.ndarray, top: float, among: np.ndarray, batch: int = 16) -> float:
+    """max(top, largest eigenvalue of the blocks ``M[among]`` (of M (nb, p, p))), visiting them by
+    decreasing trace (an upper bound of a positive semi-definite block's largest eigenvalue) while
+    it can exceed top: only blocks whose trace is above ``top`` are looked at."""
+    among = among[trace[among] > top]
+    order = among[np.argsort(-trace[among])]
     for i in range(0, order.size, batch):
         ids = order[i:i + batch]
         ids = ids[trace[ids] > top]
@@ -224,10 +226,15 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
     half = (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T  # B^(1/2)
     p = B.shape[0]
 
+    largest = [0.0]  # the largest block leverage found so far, in any thread: blocks whose trace
+    # (a bound of their leverage) is below it need no eigenvalues (a stale read only costs time)
+
     def job(item: Callable[[], tuple[RecordingRows, np.ndarray]]):
         rec, w = item()
         ids, G, S = _block_sums(rec.step // L, rec.A, w, rec.y, est.coef_)
-        inner = _block_changes(half, G[1:-1], S[1:-1]) if ids.size > 2 else None
+        inner = _block_changes(half, G[1:-1], S[1:-1], largest[0]) if ids.size > 2 else None
+        if inner is not None:
+            largest[0] = max(largest[0], inner[3])
         ends = [0, ids.size - 1] if ids.size > 1 else [0]
         return int(rec.step.min()), int(rec.step.max()), ids[ends], G[ends], S[ends], inner
 
@@ -252,7 +259,8 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
     if pending is not None:
         edges.append(pending[1:])
     if edges:
-        changes.append(_block_changes(half, np.stack([g for g, _ in edges]), np.stack([s for _, s in edges])))
+        changes.append(_block_changes(half, np.stack([g for g, _ in edges]), np.stack([s for _, s in edges]),
+                                      largest[0]))
     dd, d4, counts, tops, above, single = zip(*changes) if changes else ((),) * 6
     cov, c_sq = sum(dd, np.zeros((p, p))), sum(d4, np.zeros(p))
     blocks, top, capped = sum(counts), max(tops, default=0.0), set().union(*single)
@@ -262,12 +270,14 @@ def _jackknife(est: Estimator, data: RegressionData, L: int, workers: int = 1
                       "blocks_above_half_leverage": above, "single_block_columns": sorted(capped)}
 
 
-def _block_changes(half: np.ndarray, G: np.ndarray, S: np.ndarray
+def _block_changes(half: np.ndarray, G: np.ndarray, S: np.ndarray, known: float = 0.0
                    ) -> tuple[np.ndarray, np.ndarray, int, float, int, set[int]]:
     """For blocks with Grams G (nb, p, p) and score sums S (nb, p): ``sum_b d_b d_b^T`` and
     ``sum_b d_b^4`` of the changes ``d_b = B (I - G_b B)^-1 S_b``, the number of blocks, their
     largest leverage, how many exceed LEVERAGE_WARNING and the columns of directions one block
-    alone determines (leverage above MAX_LEVERAGE, capped there)."""
+    alone determines (leverage above MAX_LEVERAGE, capped there). ``known``: a leverage already found
+    in other blocks; blocks whose trace is below it are not looked at for the largest (which is then
+    at least ``known``)."""
     nb, p = S.shape
     # M_b = B^1/2 G_b B^1/2 (eigenvalues: block leverages), its trace (>= the largest leverage, M
     # is positive semi-definite) and x_b = B^1/2 S_b; where the trace allows no leverage above 0.5,
@@ -278,7 +288,7 @@ def _block_changes(half: np.ndarray, G: np.ndarray, S: np.ndarray
     low = trace <= LEVERAGE_WARNING
     top, above, capped = 0.0, 0, set()
     if low.any():
-        top = _largest_leverage(M[low], trace[low], top)
+        top = _largest_leverage(M, trace, known, np.flatnonzero(low))
     high = np.flatnonzero(~low)
     if high.size:  # the leverages: capped at MAX_LEVERAGE, counted, the largest reported
         h, Q = np.linalg.eigh(M[high])
