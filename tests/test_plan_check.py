@@ -264,3 +264,18 @@ def test_combine_keeps_the_first_plans_best_start_and_labels_the_searches(two_ca
 def test_cli_plan_rejects_an_unknown_search(tmp_path):
     res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--search", "narrow,deep", "--out", str(tmp_path / "p.yaml")])
     assert res.exit_code == 2 and "deep" in res.output
+
+
+def test_blas_threads_are_set_and_restored():
+    """The planner's and the check's worker processes run with one BLAS thread each (two processes with all
+    cores' BLAS threads each took 1.7-2x the wall time); the count is restored afterwards."""
+    from agvdyn.trajectories.planner.optimize import _restore_blas_threads, blas_threads
+
+    before = blas_threads(1)
+    try:
+        assert all(n >= 1 for n in before.values())
+        assert set(blas_threads(1).values()) <= {1}
+    finally:
+        _restore_blas_threads(before)
+    assert blas_threads(1) == before
+    _restore_blas_threads(before)

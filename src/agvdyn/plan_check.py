@@ -44,7 +44,7 @@ from agvdyn.identification import Identification, identify
 from agvdyn.io import Log
 from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
 from agvdyn.trajectories.planner import FREE, Plan
-from agvdyn.trajectories.planner.optimize import COND_BAR, COND_SHARE
+from agvdyn.trajectories.planner.optimize import COND_BAR, COND_SHARE, _restore_blas_threads, blas_threads
 
 __all__ = ["CandidateCheck", "Verification", "verify_plan", "measured_score", "choose", "VERIFY_SEED0",
            "PREFER_PREDICTED", "PLANT_VARIANTS", "plant_variant"]
@@ -284,11 +284,13 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
     tasks = [(i, p, s) for p in sims for s in on[p] for i in range(len(trajs))]
     if workers > 1 and "fork" in mp.get_all_start_methods():
         _SHARED.update(trajs=trajs, plan=plan, sims=sims)
+        previous = blas_threads(1)  # one BLAS thread per forked worker (docs/planning.md, "Stop 22, second helper")
         try:
             with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as ex:
                 out = list(ex.map(_task, tasks))
         finally:
             _SHARED.clear()
+            _restore_blas_threads(previous)
     else:
         out = []
         for i, p, s in tasks:
