@@ -185,9 +185,9 @@ def test_plant_variants_scale_the_tyres_of_the_given_plant():
         pc.plant_variant(base, "icy")
 
 
-def test_the_score_is_the_worst_over_the_plants(monkeypatch, two_candidates):
+def test_the_score_pools_the_plants(monkeypatch, two_candidates):
     """Candidate 0 is better on the nominal plant and worse on soft tyres: without the variants it is kept,
-    with them candidate 1 (worst over the plants 0.8 against 1.2)."""
+    with them candidate 1 (pooled mean ratio 0.8 against (0.6 + 1.4) / 2 = 1.0)."""
     plan_ = two_candidates
     cand = [c.trajectory for c in plan_.candidates]
 
@@ -196,7 +196,7 @@ def test_the_score_is_the_worst_over_the_plants(monkeypatch, two_candidates):
         if trajectory is plan_.reference_trajectory:
             std = 1.0
         elif trajectory is cand[0]:
-            std = 1.2 if soft else 0.6
+            std = 1.4 if soft else 0.6
         else:
             std = 0.8
         return SimpleNamespace(std={n: std for n in pl.FREE}, parameters=P, condition_number=17.0 if std == 1 else 6.0)
@@ -208,10 +208,10 @@ def test_the_score_is_the_worst_over_the_plants(monkeypatch, two_candidates):
     assert both.chosen == 1 and chosen.trajectory is cand[1]
     first = both.candidates[0]
     assert first.ratio["m_ch"] == pytest.approx(0.6)  # the nominal plant's figures
-    assert first.plants["soft"]["score"] == pytest.approx(1.2) and first.score == pytest.approx(1.2)
+    assert first.plants["soft"]["score"] == pytest.approx(1.4) and first.score == pytest.approx(1.0)
     data = json.loads(json.dumps(both.to_dict(), allow_nan=False))
     assert data["plants"] == [pc.NOMINAL, "soft"] and data["plant_seeds"] == [9]
-    assert data["candidates"][0]["plants"]["soft"]["score"] == pytest.approx(1.2)
+    assert data["candidates"][0]["plants"]["soft"]["score"] == pytest.approx(1.4)
     # a chosen candidate above 1 on a variant is named in the warnings
     monkeypatch.setattr(pc, "_run", lambda t, p, s, st: run(cand[0] if t is cand[1] else t, p, s, st))
     _, worse = pc.verify_plan(plan_, (7,), plants=("soft",), plant_seeds=(9,))

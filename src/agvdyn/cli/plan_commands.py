@@ -55,8 +55,8 @@ def plan(
     verify_plants: str = typer.Option(",".join(VERIFY_PLANTS) or "none", "--verify-plants",
                                       help="Plant variants the check also simulates every candidate and the default "
                                       "sequence on (two seeds each), comma-separated: soft, stiff (tyres), radii (wheel "
-                                      "radii), breakaway (static friction 1.3x); a candidate's score is its worst over "
-                                      "the plants; none: the nominal plant alone."),
+                                      "radii), breakaway (static friction 1.3x); a candidate's score pools all its runs; "
+                                      "none: the nominal plant alone."),
     figure: Optional[Path] = typer.Option(None, help="Also save the floor, path and predicted stds as a figure "
                                           "(.png, .svg or .pdf)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
