@@ -45,7 +45,8 @@ from agvdyn.identification import Identification, identify
 from agvdyn.io import Log
 from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
 from agvdyn.trajectories.planner import FREE, Plan
-from agvdyn.trajectories.planner.optimize import COND_BAR, COND_SHARE, _restore_blas_threads, blas_threads
+from agvdyn.trajectories.planner.optimize import _restore_blas_threads, blas_threads
+from agvdyn.trajectories.planner.result import COND_BAR, COND_SHARE
 
 __all__ = ["CandidateCheck", "Verification", "verify_plan", "measured_score", "choose", "VERIFY_SEED0",
            "PREFER_PREDICTED", "PLANT_VARIANTS", "plant_variant"]

@@ -44,7 +44,8 @@ sequence in the same floor (:func:`default_for_floor`).
 """
 from agvdyn.trajectories.planner.evaluation import SequenceEvaluation, default_for_floor, evaluate_sequence
 from agvdyn.trajectories.planner.figure import plan_figure
-from agvdyn.trajectories.planner.optimize import Candidate, Plan, PhaseDesign, combine, plan
+from agvdyn.trajectories.planner.optimize import plan
+from agvdyn.trajectories.planner.result import Candidate, Plan, PhaseDesign, combine
 from agvdyn.trajectories.planner.problem import _phase_models, _Problem  # noqa: F401  (tests)
 from agvdyn.trajectories.planner.settings import FREE, OBJECTIVES, PHASES, SEARCHES, NoiseLevels, PlanSettings, parse_floor
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agvdyn.trajectories.limits import FloorSpace
-from agvdyn.trajectories.planner.optimize import Plan
+from agvdyn.trajectories.planner.result import Plan
 from agvdyn.trajectories.planner.settings import FREE
 from agvdyn.trajectories.segments import Trajectory
 
