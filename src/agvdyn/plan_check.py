@@ -236,7 +236,7 @@ def _task(key):
         return f"{type(exc).__name__}: {exc}"
 
 
-def _measure(plan: Plan, cand, runs, default, params) -> dict[str, Any]:
+def _measure(runs, default, params) -> dict[str, Any]:
     """A candidate's figures on one plant: ``runs`` and ``default`` are summaries on the same seeds."""
     ratios = np.array([[r[0][n] / d[0][n] for n in FREE] for r, d in zip(runs, default)])
     truth = np.array([getattr(params, n) for n in FREE])
@@ -320,9 +320,9 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
             checks.append(CandidateCheck(cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted,
                                          math.inf, {}, {}, {}, math.inf, math.inf, failed, search=cand.search))
             continue
-        m = {p: _measure(plan, cand, runs[p], default[p], params) for p in sims}
+        m = {p: _measure(runs[p], default[p], params) for p in sims}
         nom = m[NOMINAL]
-        pooled = _measure(plan, cand, [r for p in sims for r in runs[p]], [d for p in sims for d in default[p]], params)
+        pooled = _measure([r for p in sims for r in runs[p]], [d for p in sims for d in default[p]], params)
         checks.append(CandidateCheck(
             cand.rank, cand.start, cand.objective_value, cand.evaluation.cond, predicted, nom["cond"], nom["ratio"],
             nom["ratio_max"], nom["error"], nom["error_share"], pooled["score"],
