@@ -45,7 +45,7 @@ from agvdyn.identification import Identification, identify
 from agvdyn.io import Log
 from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
 from agvdyn.trajectories.planner import FREE, Plan
-from agvdyn.trajectories.planner.optimize import _restore_blas_threads, blas_threads
+from agvdyn.trajectories.planner.optimize import one_blas_thread
 from agvdyn.trajectories.planner.result import COND_BAR, COND_SHARE
 
 __all__ = ["CandidateCheck", "Verification", "verify_plan", "measured_score", "choose", "VERIFY_SEED0",
@@ -228,7 +228,7 @@ _SHARED: dict[str, Any] = {}
 
 
 def _task(key):
-    """One simulation and identification in a worker process: the summary, or the exception's text."""
+    """One simulation and identification (in a forked worker or here): the summary, or the exception's text."""
     i, p, seed = key
     try:
         return _summary(_run(_SHARED["trajs"][i], _SHARED["plan"], seed, _SHARED["sims"][p]))
@@ -285,24 +285,17 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
     on = {NOMINAL: seeds, **{p: variant_seeds for p in plants}}
     trajs = [plan.reference_trajectory] + [c.trajectory for c in pool]
     tasks = [(i, p, s) for p in sims for s in on[p] for i in range(len(trajs))]
-    if workers > 1 and "fork" in mp.get_all_start_methods():
-        _SHARED.update(trajs=trajs, plan=plan, sims=sims)
-        previous = blas_threads(1)  # one BLAS thread per forked worker (docs/planning.md, "Stop 22, second helper")
-        try:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as ex:
-                out = list(ex.map(_task, tasks))
-        finally:
-            _SHARED.clear()
-            _restore_blas_threads(previous)
-    else:
-        out = []
-        for i, p, s in tasks:
-            try:
-                out.append(_summary(_run(trajs[i], plan, s, sims[p])))
-            except Exception as exc:  # noqa: BLE001 - a refused identification is a measured outcome
-                if i == 0:
-                    raise
-                out.append(f"{type(exc).__name__}: {exc}")
+    forked = workers > 1 and "fork" in mp.get_all_start_methods()
+    _SHARED.update(trajs=trajs, plan=plan, sims=sims)
+    try:
+        with one_blas_thread(forked):  # one BLAS thread per forked worker
+            if forked:
+                with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as ex:
+                    out = list(ex.map(_task, tasks))
+            else:
+                out = [_task(t) for t in tasks]
+    finally:
+        _SHARED.clear()
     results = dict(zip(tasks, out))
     for (i, p, s), r in results.items():
         if i == 0 and isinstance(r, str):

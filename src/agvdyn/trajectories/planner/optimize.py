@@ -1,6 +1,7 @@
 """plan(): several starts of L-BFGS-B over all phases, the plan and its checks."""
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -47,47 +48,16 @@ def _worker(args) -> tuple[float, np.ndarray, list[int], dict[str, Any]]:
     return float(res.fun), res.x, [b.H for b in problem.bases], info
 
 
-def blas_threads(n: int) -> dict[str, int]:
-    """Set the thread count of the OpenBLAS libraries loaded in this process (numpy's and scipy's bundled
-    copies) to ``n``; return the previous count per library (empty where none is found, e.g. another BLAS).
+def one_blas_thread(active: bool = True) -> Any:
+    """A context in which the BLAS libraries of this process (and of processes forked in it) use one
+    thread (``threadpoolctl``): worker processes that inherit all cores' BLAS threads each start that
+    many on small matrix products (``agvdyn plan`` on two cores took 1.7-2x the wall time; docs/planning.md,
+    "Stop 22, second helper"); the counts are restored on leaving. ``active`` False: nothing changes."""
+    if not active:
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
 
-    Worker processes forked from a process with all cores' BLAS threads each start that many threads
-    on small matrix products: on two cores ``agvdyn plan`` took 1.7-2x the wall time of the same plan
-    with one BLAS thread per process (docs/planning.md, "Stop 22, second helper"). The plans are the
-    same either way (the starts' objectives and the chosen start were identical)."""
-    import ctypes
-
-    try:
-        with open("/proc/self/maps", encoding="utf-8") as maps:
-            paths = sorted({line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")})
-    except OSError:
-        return {}
-    previous = {}
-    for path in paths:
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for prefix, suffix in (("scipy_openblas", "64_"), ("scipy_openblas", ""), ("openblas", "64_"), ("openblas", "")):
-            get = getattr(lib, f"{prefix}_get_num_threads{suffix}", None)
-            put = getattr(lib, f"{prefix}_set_num_threads{suffix}", None)
-            if get is not None and put is not None:
-                previous[path] = int(get())
-                put(int(n))
-                break
-    return previous
-
-
-def _restore_blas_threads(previous: dict[str, int]) -> None:
-    import ctypes
-
-    for path, n in previous.items():
-        lib = ctypes.CDLL(path)
-        for prefix, suffix in (("scipy_openblas", "64_"), ("scipy_openblas", ""), ("openblas", "64_"), ("openblas", "")):
-            put = getattr(lib, f"{prefix}_set_num_threads{suffix}", None)
-            if put is not None:
-                put(int(n))
-                break
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _run_starts(jobs: list, settings: PlanSettings) -> list[tuple[float, np.ndarray, list[int], dict[str, Any]]]:
@@ -98,16 +68,15 @@ def _run_starts(jobs: list, settings: PlanSettings) -> list[tuple[float, np.ndar
     rest = settings.max_iterations - first
     workers = settings.workers or min(2, os.cpu_count() or 1)
     pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs))) if workers > 1 and len(jobs) > 1 else None
-    previous = blas_threads(1) if pool is not None else {}  # inherited by the forked workers
     try:
-        mapper = pool.map if pool is not None else map
-        results = list(mapper(_worker, [(*job, first) for job in jobs]))
-        order = sorted(range(len(results)), key=lambda i: results[i][0])[:settings.refine] if rest > 0 else []
-        again = list(mapper(_worker, [(jobs[i][0], results[i][1], jobs[i][2], rest) for i in order]))
+        with one_blas_thread(pool is not None):  # inherited by the forked workers
+            mapper = pool.map if pool is not None else map
+            results = list(mapper(_worker, [(*job, first) for job in jobs]))
+            order = sorted(range(len(results)), key=lambda i: results[i][0])[:settings.refine] if rest > 0 else []
+            again = list(mapper(_worker, [(jobs[i][0], results[i][1], jobs[i][2], rest) for i in order]))
     finally:
         if pool is not None:
             pool.shutdown()
-        _restore_blas_threads(previous)
     for i, (fun, x, harmonics, info) in zip(order, again):
         before = results[i][3]
         info.update(iterations=before["iterations"] + info["iterations"], seconds=before["seconds"] + info["seconds"],
