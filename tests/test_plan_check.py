@@ -237,9 +237,11 @@ def test_cli_plan_rejects_an_unknown_plant_variant(tmp_path):
 
 
 def test_search_presets_and_their_errors():
-    assert pl.PlanSettings.search("narrow") == pl.PlanSettings()
+    assert pl.PlanSettings.search("wide") == pl.PlanSettings()  # the default since stop 23
     wide = pl.PlanSettings.search("wide", seed=3)
     assert (wide.starts, wide.peak_exponent, wide.explore_iterations, wide.refine, wide.seed) == (12, 64.0, 80, 4, 3)
+    narrow = pl.PlanSettings.search("narrow", seed=3)
+    assert (narrow.starts, narrow.peak_exponent, narrow.explore_iterations, narrow.refine) == (6, math.inf, 300, 2)
     with pytest.raises(ValueError, match="search 'deep'"):
         pl.PlanSettings.search("deep")
 

@@ -174,8 +174,7 @@ class Verification:
                 out.append(f"measured on the {p} plant variant: score {m['score']:.2f} (cond {m['cond']:.2f}, "
                            f"{w} std {m['ratio'][w]:.2f}x the default's, largest error {max(m['error'].values()):.1f} %)")
         if out:
-            out.append("plan again with --search wide (measured better on average on two vehicles, docs/planning.md), "
-                       "another --seed or more --starts, or a longer --duration")
+            out.append("plan again with another --seed, --search narrow,wide, more --starts, or a longer --duration")
         return tuple(out)
 
     def to_dict(self) -> dict[str, Any]:

@@ -15,15 +15,15 @@ from agvdyn.cli._app import app, fail, platform_option
 #: Default of ``--verify`` (docs/planning.md, "Stop 22").
 VERIFY_DEFAULT = 4
 #: The check simulates at most this many starts, best predicted objective first (~1.5 s each with four
-#: seeds, the build included); with the default six starts, all of them.
+#: seeds, the build included): half of the default search's twelve.
 VERIFY_CANDIDATES = 6
 #: Default of ``--verify-plants``: plant variants (``agvdyn.plan_check.PLANT_VARIANTS``) every candidate is
 #: also simulated on (docs/planning.md, "Stop 22, second helper").
 VERIFY_PLANTS: tuple[str, ...] = ()
 #: Noise seeds per plant variant.
 VERIFY_PLANT_SEEDS = 2
-#: Default of ``--search`` (``agvdyn.trajectories.planner.SEARCHES``).
-SEARCH_DEFAULT = "narrow"
+#: Default of ``--search`` (``agvdyn.trajectories.planner.SEARCHES``; docs/planning.md, "Stop 23").
+SEARCH_DEFAULT = "wide"
 
 
 @app.command()
@@ -41,12 +41,12 @@ def plan(
                                           "and the relative stds; default: Table 2 with B_w = 0.121."),
     settings: Optional[Path] = typer.Option(None, help="Simulation settings (YAML) whose limits group (and the "
                                             "plant's torque_limit) bound the plan; see docs/simulation.md."),
-    search: str = typer.Option(SEARCH_DEFAULT, help="Search of the optimiser: narrow (six starts of 300 "
-                               "iterations, each phase scaled to its largest peak), wide (twelve starts, a smooth "
-                               "bound on the peaks, 80 iterations each and the best four on to 300), or both "
+    search: str = typer.Option(SEARCH_DEFAULT, help="Search of the optimiser: wide (the default: twelve "
+                               "starts, a smooth bound on the peaks, 80 iterations each and the best four on to 300), "
+                               "narrow (six starts of 300 iterations, each phase scaled to its largest peak), or both "
                                "(narrow,wide: the check chooses among the best six of each; the first's best start "
                                "unless another is measured better; with --verify 0 the first alone)."),
-    starts: Optional[int] = typer.Option(None, help="Random starts of the optimiser (default: the search's, 6 or 12)."),
+    starts: Optional[int] = typer.Option(None, help="Random starts of the optimiser (default: the search's, 12 or 6)."),
     seed: int = typer.Option(0, help="Seed of the starts."),
     verify: int = typer.Option(VERIFY_DEFAULT, "--verify", min=0, help="Noise seeds per candidate for a check on the "
                                "simulator: the best starts (at most six) and the default sequence are simulated and identified "

@@ -93,8 +93,7 @@ class Plan:
         out = []
         if ev.cond > COND_BAR or ev.cond > COND_SHARE * ref.cond:
             out.append(f"predicted cond {ev.cond:.2f} is above {COND_BAR:g} or {COND_SHARE:g}x the default sequence's "
-                       f"{ref.cond:.2f}: plan again with --search wide, another --seed or more --starts, or a longer "
-                       "--duration")
+                       f"{ref.cond:.2f}: plan again with another --seed, more --starts or a longer --duration")
         worse = [n for n in ev.std if n in ref.std and ev.std[n] > ref.std[n]]
         if worse:
             out.append(f"predicted std of {', '.join(worse)} above the default sequence's: check the plan on the "

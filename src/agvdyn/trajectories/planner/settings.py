@@ -148,10 +148,11 @@ class PlanSettings:
         ``reference_penalty`` the weight of both.
     margin : share of every limit the plan may use (the rest for tracking and rounding).
     peak_exponent : the optimiser scales each phase to the ``peak_exponent``-norm of its samples'
-        ``|x| / limit`` (e.g. 64: a smooth bound a few per cent above the largest) or, inf (default),
+        ``|x| / limit`` (64, the default: a smooth bound a few per cent above the largest) or, inf,
         to the largest itself, whose kinks where two peaks are equal stop L-BFGS-B after 16-240
-        iterations; the plan is scaled exactly either way. 64 reaches much lower objectives, but on the
-        simulator its plans were worse (docs/planning.md, "Stop 20"): the default stays inf.
+        iterations; the plan is scaled exactly either way. Alone, 64 gave worse plans on the simulator
+        (docs/planning.md, "Stop 20"); with twelve starts and the check of ``agvdyn plan`` better ones
+        on three vehicles ("Stop 23"): the defaults are the ``wide`` search of :data:`SEARCHES`.
     pause, align_rate, align_acceleration : the alignments at rest between the phases.
     grid : time step of the optimiser's evaluation, s (the result is evaluated at ``T_s``).
     max_iterations : of L-BFGS-B per start; with ``explore_iterations`` below it, every start runs
@@ -164,7 +165,7 @@ class PlanSettings:
     """
 
     objective: str = "std"
-    starts: int = 6
+    starts: int = 12
     seed: int = 0
     workers: int | None = None
     harmonics: tuple[int, int] = (4, 30)
@@ -188,14 +189,14 @@ class PlanSettings:
     cond_target: float = 6.0
     reference_penalty: float = 20.0
     margin: float = 0.97
-    peak_exponent: float = math.inf
+    peak_exponent: float = 64.0
     pause: float = 0.5
     align_rate: float = 0.8
     align_acceleration: float = 2.0
     grid: float = 0.02
     max_iterations: int = 300
-    explore_iterations: int = 300
-    refine: int = 2
+    explore_iterations: int = 80
+    refine: int = 4
     candidates: int = 1
     noise: NoiseLevels = field(default_factory=NoiseLevels)
     torque_offsets: bool = True
@@ -256,12 +257,13 @@ class PlanSettings:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
 
 
-#: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``narrow``: the
-#: defaults of :class:`PlanSettings` (six starts of 300 iterations, each phase scaled to its largest
-#: peak). ``wide``: twelve starts, each phase scaled to the 64-norm of its peaks (a smooth bound, so
-#: L-BFGS-B does not stop at the kinks of the max), 80 iterations each and the best four on to 300
-#: (docs/planning.md, "Stop 22, second helper": on plan seeds 0-5 of both vehicles, measured on the
-#: simulator, better than ``narrow`` with the check on average on both and on most single seeds).
+#: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``wide``: the
+#: defaults of :class:`PlanSettings`, twelve starts, each phase scaled to the 64-norm of its peaks (a
+#: smooth bound, so L-BFGS-B does not stop at the kinks of the max), 80 iterations each and the best
+#: four on to 300. ``narrow``: six starts of 300 iterations, each phase scaled to its largest peak (the
+#: default until stop 22). With the check of ``agvdyn plan``, ``wide`` was better on average over plan
+#: seeds 0-5 on each of three vehicles, the third held out (docs/planning.md, "Stop 22, second helper",
+#: "Stop 23").
 SEARCHES: dict[str, dict[str, float | int]] = {
     "narrow": {"starts": 6, "peak_exponent": math.inf, "explore_iterations": 300, "refine": 2},
     "wide": {"starts": 12, "peak_exponent": 64.0, "explore_iterations": 80, "refine": 4},
