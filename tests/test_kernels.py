@@ -3,6 +3,7 @@ formulation they replace: derivatives, odometry and slip, entries of Theta, mode
 stiction mask and guard, and the gathered kept rows."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numba
@@ -84,14 +85,17 @@ def test_modes_equal_the_rules_on_numpy(log):
     assert set(np.unique(mode)) >= {int(Mode.PARKING), int(Mode.STRAIGHT), int(Mode.ROTATION)}
 
 
-def test_projection_mask_and_guard_equal_projected_block(log):
-    st = filtered_stretch(PROTOTYPE, log, 0, len(log.t), SETTINGS)
+@pytest.mark.parametrize("steering_guard", [SETTINGS.steering_guard, 4.0])
+def test_projection_mask_and_guard_equal_projected_block(log, steering_guard):
+    settings = dataclasses.replace(SETTINGS, steering_guard=steering_guard)
+    st = filtered_stretch(PROTOTYPE, log, 0, len(log.t), settings)
     mode, av = _modes_and_virtual_angle(PROTOTYPE, st, SETTINGS)
     usable = ~st.edge & (mode != NO_MODE)
     usable[len(usable) // 3: len(usable) // 3 + 40] = False  # a hole: the guard acts inside a run
     mine = np.ones(st.n, dtype=bool)
-    guard = int(round(SETTINGS.seconds(SETTINGS.stiction_guard) / st.dt))
-    blocks = _stretch_blocks(PROTOTYPE, st, mode, av, usable, None, SETTINGS, "r", mine)
+    guards = {c: int(round(settings.seconds(g) / st.dt)) for c, g in settings.guards().items()}
+    assert guards["alpha_l"] == round(steering_guard / 2) * guards["x_ch"] > 0  # the steering's own guard
+    blocks = _stretch_blocks(PROTOTYPE, st, mode, av, usable, None, settings, "r", mine)
     assert blocks
     for b in blocks:
         a, e = int(b.sample[0]), int(b.sample[-1]) + 1
@@ -102,7 +106,9 @@ def test_projection_mask_and_guard_equal_projected_block(log):
         _close(b.torque, ref.torque, 1e-9)
         _close(b.s_dot, ref.s_dot, 1e-9)  # sums of wheel rates that cancel: round-off of the q_dot scale
         _close(np.asarray(b.offset_regressor), np.asarray(ref.offset_regressor))
-        np.testing.assert_array_equal(b.keep, guarded_mask(ref.keep & usable[a:e, None], guard))
+        for j, coordinate in enumerate(b.mode.coordinates):
+            np.testing.assert_array_equal(b.keep[:, j], guarded_mask(ref.keep[:, j:j + 1] & usable[a:e, None],
+                                                                     guards[coordinate])[:, 0])
 
 
 def test_kept_rows_are_the_blocks_rows_in_order(log):

@@ -94,6 +94,7 @@ def test_planner_thresholds_are_the_identification_defaults():
     assert plan_.steering_threshold == ident.steering_threshold
     assert plan_.stiction_threshold == ident.stiction_threshold
     assert plan_.stiction_guard == pytest.approx(ident.seconds(ident.stiction_guard))
+    assert plan_.steering_guard == pytest.approx(ident.seconds(ident.steering_guard))
 
 
 def test_prediction_of_the_default_sequence():

@@ -35,6 +35,9 @@ SteeringStictionOpt = Annotated[float, typer.Option(
     help="The same for the steering coordinates alpha_l, alpha_r, alpha_v (rad/s).")]
 GuardOpt = Annotated[float, typer.Option(
     help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off).")]
+SteeringGuardOpt = Annotated[float, typer.Option(
+    help="The same for the steering coordinates, whose reversals stick (4: 100 ms, for joints that stick "
+         "harder than they slide or whose friction is large against their inertia; docs/identification.md).")]
 OffsetsOpt = Annotated[bool, typer.Option("--offsets/--no-offsets",
                                           help="Estimate constant motor-torque offsets with the parameters.")]
 SegmentsOpt = Annotated[Optional[str], typer.Option(
@@ -91,7 +94,7 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
-              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0,
+              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0, steering_guard: float = 2.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
               slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = UNCERTAINTY,
               bandwidth: Optional[int] = None, unexcited: Optional[str] = None,
@@ -107,7 +110,8 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
         return IdentificationSettings(
             filter=FilterSettings(cutoff=cutoff, order=order), filtering=mode,
             stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
-            stiction_guard=guard, max_inflation=max_inflation, max_relative_std=max_relative_std,
+            stiction_guard=guard, steering_guard=steering_guard, max_inflation=max_inflation,
+            max_relative_std=max_relative_std,
             slip_threshold=slip_threshold, estimator=estimator, uncertainty=uncertainty, bandwidth=bandwidth,
             unexcited=unexcited, torque_lead=torque_lead,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
@@ -175,6 +179,7 @@ def identify(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 2.0,
     offsets: OffsetsOpt = True,
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,
@@ -199,8 +204,8 @@ def identify(
     """
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth,
-                         unexcited, torque_lead)
+                         steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
+                         bandwidth, unexcited, torque_lead)
     # logs are read one at a time inside identify(): memory does not grow with their number
     ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False,
                         workers=threads)
@@ -270,13 +275,15 @@ def validate(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 2.0,
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
     from agvdyn.platform import PROTOTYPE, platform_of_parameters, read_parameters, read_platform
     from agvdyn.validation import validate as validate_log
 
-    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard)
+    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard,
+                         steering_guard)
     try:
         content = read_parameters(params)
         override = None if platform is None else read_platform(platform)
@@ -333,6 +340,7 @@ def report(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 2.0,
     offsets: OffsetsOpt = True,
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,
@@ -354,8 +362,8 @@ def report(
 
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         max_inflation, max_relative_std, slip_threshold, estimator, uncertainty, bandwidth,
-                         unexcited, torque_lead)
+                         steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
+                         bandwidth, unexcited, torque_lead)
     try:
         ref = None if reference is None else reference_from_file(reference)
     except (ValueError, OSError) as exc:

@@ -238,13 +238,13 @@ def _project_row(H, dof, sig, torque, j, i_G, Y, tau):  # pragma: no cover - com
 
 
 @numba.njit(cache=True, nogil=True)
-def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thresholds, usable, mine, guard,
+def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thresholds, usable, mine, guards,
                        l, b, a, r, limit, i_G, Y, tau, s_dot, keep, offsets, runs):  # pragma: no cover
     """Rows of eq. (19) of every run of one mode (mode != 0 with a usable row of its own) of a
     stretch: ``Y`` (n, 2, 11) ``H_k^T Theta``, ``tau`` (n, 2), ``s_dot`` (n, 2) ``H_k^+ q_dot``,
     ``offsets`` (n, 2, 4) ``H_k^T B e_i`` (mode 2 rows only; constant otherwise), ``keep`` (n, 2)
-    ``|s_dot| >= threshold`` and usable, with ``guard`` rows around a dropped row or the run's
-    ends dropped too, and own rows only. Slots beyond the mode's dof are not written. ``runs``
+    ``|s_dot| >= threshold`` and usable, with ``guards[mode, slot]`` rows around a dropped row or
+    the run's ends dropped too, and own rows only. Slots beyond the mode's dof are not written. ``runs``
     (n, 2) gets the runs; returns their number."""
     n = mode.shape[0]
     H = np.empty((9, 2))
@@ -300,6 +300,7 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
             _project_row(H, dof, sig, torque, j, i_G, Y, tau)
         for c in range(dof):
             thr = thresholds[m, c]
+            guard = guards[m, c]
             last = start - 1  # the rows before the run count as dropped
             for j in range(start, stop):
                 if not (abs(s_dot[j, c]) >= thr and usable[j]):

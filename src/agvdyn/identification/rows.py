@@ -126,6 +126,17 @@ def _mode_tables(geometry: Geometry, thresholds: tuple[tuple[str, float], ...]) 
     return _ModeTables(h, pinv, dof, thr, nominal, np.ascontiguousarray(h[Mode.PARKING, 5:, :]), offsets)
 
 
+@functools.lru_cache(maxsize=32)
+def _guard_samples(guards: tuple[tuple[str, float], ...], cutoff: float, dt: float) -> np.ndarray:
+    """(6, 2) stiction guard in samples of each mode's coordinate slots (read-only)."""
+    seconds = {c: multiple / cutoff for c, multiple in guards}
+    out = np.zeros((6, 2), dtype=np.int64)
+    for m in Mode:
+        out[m, :m.dof] = [int(round(seconds[c] / dt)) for c in m.coordinates]
+    out.flags.writeable = False
+    return out
+
+
 def _tables(geometry: Geometry, settings: IdentificationSettings) -> _ModeTables:
     return _mode_tables(geometry, tuple(sorted(settings.thresholds().items())))
 
@@ -214,7 +225,7 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there). The rows of all
     runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views."""
-    guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
+    guards = _guard_samples(tuple(sorted(settings.guards().items())), float(settings.filter.cutoff), float(st.dt))
     tables = _tables(geometry, settings)
     n = st.n
     Y, tau = empty(workspace, f"Y{tag}", (n, 2, 11)), empty(workspace, f"tau{tag}", (n, 2))
@@ -222,7 +233,7 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
     offsets = empty(workspace, f"offsets{tag}", (n, 2, 4))
     runs_found = empty(workspace, f"runs{tag}", (n, 2), np.int64)
     count = stretch_projection(mode, av, st.q_dot, st.signals, st.torque, tables.h, tables.pinv, tables.dof, tables.thresholds,
-                               usable, mine, guard, geometry.l, geometry.b, geometry.a, geometry.r,
+                               usable, mine, guards, geometry.l, geometry.b, geometry.a, geometry.r,
                                max_virtual_angle(geometry), geometry.i_G, Y, tau, s_dot, keep, offsets, runs_found)
     blocks = []
     sample = np.arange(st.rows.start, st.rows.start + n)

@@ -61,7 +61,8 @@ class Filtering(str, Enum):
     LITERAL = "literal"
 
 
-_NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "mode_tolerance", "epsilon",
+_NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "steering_guard", "mode_tolerance",
+                 "epsilon",
                  "rank_tolerance", "sample_jitter", "rest_speed", "steering_rest_rate", "edge_guard",
                  "slip_spread", "slip_floor", "slip_guard", "stretch_gap", "steering_jump_rate",
                  "wheel_jump_rate")
@@ -104,6 +105,12 @@ class IdentificationSettings:
         torque is dominated by Coulomb friction and stick/slip around reversals.
     stiction_guard : rows within ``stiction_guard / filter.cutoff`` s of a stiction row or a mode
         change are dropped too (the filter spreads each sample over about that time).
+    steering_guard : the same for the steering coordinates (default 2, as the chassis'). At a
+        steering reversal the joint sticks against 10-20x the torque its inertia needs; that step,
+        spread by the filter (its step response overshoots by 6.8 % at 3 / cutoff and stays within
+        5 % from 4 / cutoff on), biases C_l and C_r where the friction is large against the inertia
+        or sticks harder than it slides: 4 removes most of it, at a cost in cond and in the
+        steering stds (docs/identification.md, step 6, "Stop 23").
     torque_offsets : estimate a constant offset of each motor-torque measurement (nuisance
         parameters shared by all logs of one identification).
     epsilon : width of the tanh Coulomb model, rad/s.
@@ -154,6 +161,7 @@ class IdentificationSettings:
     stiction_threshold: float = 0.05
     steering_threshold: float = 0.1
     stiction_guard: float = 2.0
+    steering_guard: float = 2.0
     torque_offsets: bool = True
     epsilon: float = EPSILON
     torque_lead: float | None = None
@@ -230,6 +238,11 @@ class IdentificationSettings:
         """Stiction threshold of each generalized coordinate name."""
         steering = dict.fromkeys(STEERING_COORDINATES, self.steering_threshold)
         return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_threshold), **steering}
+
+    def guards(self) -> dict[str, float]:
+        """Stiction guard (multiples of ``1 / filter.cutoff``) of each generalized coordinate name."""
+        steering = dict.fromkeys(STEERING_COORDINATES, self.steering_guard)
+        return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_guard), **steering}
 
     def seconds(self, multiple: float) -> float:
         """``multiple / filter.cutoff``: a time in units of the filter's time constant, s."""

@@ -73,7 +73,6 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
     instead of the mask."""
     g = traj.geometry
     n_p = 11 if with_bw else 10
-    guard = int(round(settings.stiction_guard / traj.sample_time))
     rows, sig, fac = [], [], []
     for seg in traj.segments:
         if seg.lifted:  # no rows of the vehicle
@@ -86,10 +85,10 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             th = settings.threshold(coord)
             if validity:
                 keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings,
-                                      settings.noise.saturation).wU
+                                      settings.noise.saturation, settings.guard(coord)).wU
                 keep = keep_w > 1e-6
             else:
-                keep = _guarded(np.abs(v) >= th, guard)
+                keep = _guarded(np.abs(v) >= th, int(round(settings.guard(coord) / traj.sample_time)))
                 keep_w = keep.astype(float)
             if not keep.any():
                 continue

@@ -134,9 +134,10 @@ class PlanSettings:
         ``parameter_margins`` overrides it by name: the stds that rest on few jackknife blocks
         (m_ch, C_ch, d_vw) or whose default-sequence prediction is high (d_cw) scatter most
         against the default's and get 0.45-0.5.
-    steering_threshold, stiction_threshold, stiction_guard : the identification's stiction
-        thresholds (rad/s steering; m/s, rad/s chassis) and guard (s) used to predict which rows
-        it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05, 2 / 40 rad/s).
+    steering_threshold, stiction_threshold, stiction_guard, steering_guard : the identification's
+        stiction thresholds (rad/s steering; m/s, rad/s chassis) and guards (s, chassis and steering)
+        used to predict which rows it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05,
+        2 / 40 rad/s for both).
     validity : rows count in the objective from ``validity`` times the threshold on (smooth step
         of relative width ``validity_width``): slow motion is where the friction model is least true.
     band_penalty : weight of the share of the phases' time spent below that speed.
@@ -181,6 +182,7 @@ class PlanSettings:
     steering_threshold: float = 0.1
     stiction_threshold: float = 0.05
     stiction_guard: float = 0.05
+    steering_guard: float = 0.05
     validity: float = 2.0
     validity_width: float = 0.15
     band_penalty: float = 0.5
@@ -216,7 +218,7 @@ class PlanSettings:
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number > 0")
-        for key in ("stiction_guard", "pause", "reference_penalty", "band_penalty", "reversal_window",
+        for key in ("stiction_guard", "steering_guard", "pause", "reference_penalty", "band_penalty", "reversal_window",
                     "reversal_penalty"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -255,6 +257,10 @@ class PlanSettings:
 
     def threshold(self, coordinate: str) -> float:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
+
+    def guard(self, coordinate: str) -> float:
+        """The identification's stiction guard of ``coordinate``, s."""
+        return self.steering_guard if coordinate.startswith("alpha") else self.stiction_guard
 
 
 #: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``wide``: the
