@@ -62,8 +62,7 @@ class Filtering(str, Enum):
 
 
 _NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "steering_guard", "mode_tolerance",
-                 "epsilon",
-                 "rank_tolerance", "sample_jitter", "rest_speed", "steering_rest_rate", "edge_guard",
+                 "epsilon", "rank_tolerance", "sample_jitter", "rest_speed", "steering_rest_rate", "edge_guard",
                  "slip_spread", "slip_floor", "slip_guard", "stretch_gap", "steering_jump_rate",
                  "wheel_jump_rate")
 

@@ -218,8 +218,8 @@ class PlanSettings:
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number > 0")
-        for key in ("stiction_guard", "steering_guard", "pause", "reference_penalty", "band_penalty", "reversal_window",
-                    "reversal_penalty"):
+        for key in ("stiction_guard", "steering_guard", "pause", "reference_penalty", "band_penalty",
+                    "reversal_window", "reversal_penalty"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number >= 0")

@@ -34,9 +34,9 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
     and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
 
     * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
-    * contamination ``k``: a row the identification keeps (more than the guard ``g`` (``guard``, s;
-      None: ``st.stiction_guard``) after the
-      velocity passed ``th``) but within ``reversal_window`` of a velocity reversal: there the
+    * contamination ``k``: a row the identification keeps (more than the guard ``g`` after the
+      velocity passed ``th``; ``guard`` s, None: ``st.stiction_guard``) but within
+      ``reversal_window`` of a velocity reversal: there the
       stick of the reversal, spread by the zero-phase filter, is in the torques. With the
       acceleration a near the reversal, such rows have ``th + g |a| <= |v| < window |a|``
       (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
