@@ -95,14 +95,18 @@ def test_planner_thresholds_are_the_identification_defaults():
     assert plan_.stiction_threshold == ident.stiction_threshold
     assert plan_.stiction_guard == pytest.approx(ident.seconds(ident.stiction_guard))
     assert plan_.steering_guard == pytest.approx(ident.seconds(ident.steering_guard))
+    assert plan_.guard("alpha_l", weights=True) == plan_.steering_weights_guard < plan_.steering_guard  # see PlanSettings
 
 
 def test_prediction_of_the_default_sequence():
-    """The predicted cond of the default sequence is the one the identification reports on the simulator
-    (17.4); the predicted stds are within 0.85-1.25x its jackknife stds (means over seeds 1-6: C_l
-    0.0031, m_ch 0.65, C_ch 0.42; docs/planning.md)."""
+    """The predicted cond of the default sequence is near the one the identification reports on the
+    simulator (predicted 22.0; identified 20.8-21.1 with the steering guard of 4, 17.2-17.4 with 2); the
+    predicted stds are within 0.85-1.25x its jackknife stds (means over seeds 1-6: C_l 0.0031, m_ch
+    0.65, C_ch 0.42; docs/planning.md)."""
     ev = pl.evaluate_sequence(identification_sequence(), P)
-    assert 15 < ev.cond < 20
+    assert 19 < ev.cond < 24
+    two = pl.evaluate_sequence(identification_sequence(), P, settings=pl.PlanSettings(steering_guard=0.05))
+    assert 15 < two.cond < 20
     assert ev.std["C_l"] == pytest.approx(0.0031, rel=0.2)
     assert ev.std["m_ch"] == pytest.approx(0.65, rel=0.2)
     assert ev.std["C_ch"] == pytest.approx(0.42, rel=0.3)
@@ -177,7 +181,7 @@ def test_plan_file_round_trip_and_figure(quick_plan, tmp_path):
 
 def test_plan_warns_when_its_prediction_misses_the_bar(quick_plan):
     ev, ref = quick_plan.evaluation, quick_plan.reference
-    good = dataclasses.replace(quick_plan, evaluation=dataclasses.replace(ev, cond=0.5 * ref.cond,
+    good = dataclasses.replace(quick_plan, evaluation=dataclasses.replace(ev, cond=min(0.5 * ref.cond, 8.0),
                                                                           std={n: 0.9 * v for n, v in ref.std.items()}))
     assert good.warnings == () and good.to_dict()["warnings"] == []
     high = dataclasses.replace(good, evaluation=dataclasses.replace(good.evaluation, cond=0.7 * ref.cond))
@@ -228,11 +232,11 @@ def acceptance():
     jackknife std) on seeds 0-3.
 
     The plan is ``plan()``'s with its defaults (the ``wide`` search, the best predicted start, no check
-    on the simulator). What holds (docs/planning.md, "Stop 23", seeds 0-5): cond 8.17-8.20 (default
-    17.2-17.4); every parameter within 5 % of the truth (largest C_r +3.3 %); every std no larger than
-    the default sequence's on each seed, the means over seeds 0-3 0.29-0.74 (largest d_cw). The
-    predicted stds (``evaluate_sequence``) are within 0.85-1.15x the jackknife ones on the default
-    sequence and 1.0-1.8x on the plan (conservative: C_r 1.8x, d_vr 1.56x, C_ch 1.45x)."""
+    on the simulator). What holds (docs/planning.md, "Stop 23", seeds 0-5, steering guard 4): cond
+    8.25-8.27 (default 20.8-21.1); every parameter within 5 % of the truth (largest C_ch +1.5 %, the
+    steering-unit masses); the plan's stds below the default sequence's but C_l on seed 3 (1.08x), the
+    means over seeds 0-3 0.30-0.82 (largest C_l). The predicted stds (``evaluate_sequence``) are within
+    0.7-2x the jackknife ones (conservative: the plan's d_vl, C_r, d_vr, d_cr 1.55-1.76x, the default's C_r 1.47x)."""
     plan_ = pl.plan(PROTOTYPE, "5.2x1.6")
     runs = [(identify(_log(simulate(plan_.trajectory, seed=s))), identify(_log(simulate("identification", seed=s))))
             for s in SEEDS]
@@ -248,23 +252,29 @@ def test_planned_sequence_is_better_conditioned(acceptance):
 
 
 def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
-    """On seeds 0-3 every jackknife std of the plan is below the default sequence's, and on average clearly
-    below (seeds 0-3: largest mean ratio d_cw 0.74)."""
+    """The plan's jackknife stds against the default sequence's, seeds 0-3: on average clearly below
+    (largest mean ratio C_l 0.82, d_cw 0.73), and of the 40 single (seed, parameter) ratios one above 1:
+    C_l 1.08x on seed 3. That one is the price of the steering guard of 4 (since stop 23), which drops
+    the rows just after the plan's fast reversals; with 2 no ratio was above 1 on seeds 0-5, but C_l and
+    C_r of both sequences came out 5-20 % low where the steering joints stick hard (docs/planning.md,
+    "Stop 23: a longer guard")."""
     _, runs = acceptance
-    for seed, (planned, default) in zip(SEEDS, runs):
-        worse = {n: (planned.std[n], default.std[n]) for n in planned.std if planned.std[n] > default.std[n]}
-        assert not worse, f"seed {seed}: std larger than with the default sequence: {worse}"
-    ratio = {n: np.mean([p.std[n] / d.std[n] for p, d in runs]) for n in pl.FREE}
-    assert max(ratio.values()) < 0.9, ratio
+    ratios = {(seed, n): p.std[n] / d.std[n] for seed, (p, d) in zip(SEEDS, runs) for n in pl.FREE}
+    above = {key: round(r, 3) for key, r in ratios.items() if r > 1}
+    assert len(above) <= 1 and max(ratios.values()) < 1.15, f"stds above the default sequence's: {above}"
+    mean = {n: np.mean([ratios[(s, n)] for s in SEEDS]) for n in pl.FREE}
+    assert max(mean.values()) < 0.9, mean
 
 
 def test_predicted_stds_match_the_jackknife(acceptance):
     """The planner's predicted std (the sandwich with rows whose variance grows with the acceleration,
     ``NoiseLevels``) against the identified jackknife std, mean over the seeds, on both sequences (seeds
-    0-3: default sequence 0.85-1.14; plan 1.01-1.8, its C_r and d_vr predicted 1.6-1.8x too large). Never
-    optimistic by more than 0.7x; on the plan at most 2x pessimistic, on the default sequence 1.5x."""
+    0-3, steering guard 4: the default sequence 0.95-1.56, the plan 0.89-1.76; the steering stds C_r,
+    d_vr, d_vl, d_cr predicted 1.5-1.8x too large on the plan, C_r 1.56x on the default sequence: the
+    planner's noise levels were fitted with the guard of 2). Never optimistic by more than 0.7x, at
+    most 2x pessimistic."""
     plan_, runs = acceptance
-    for k, evaluation, high in ((0, plan_.evaluation, 2.0), (1, plan_.reference, 1.5)):
+    for k, evaluation, high in ((0, plan_.evaluation, 2.0), (1, plan_.reference, 2.0)):
         for n in pl.FREE:
             measured = np.mean([r[k].std[n] for r in runs])
             assert 0.7 < evaluation.std[n] / measured < high, (k, n, evaluation.std[n], measured)

@@ -36,8 +36,8 @@ SteeringStictionOpt = Annotated[float, typer.Option(
 GuardOpt = Annotated[float, typer.Option(
     help="Also drop rows within STICTION_GUARD / cutoff seconds of a stiction row (0: off).")]
 SteeringGuardOpt = Annotated[float, typer.Option(
-    help="The same for the steering coordinates, whose reversals stick (4: 100 ms, for joints that stick "
-         "harder than they slide or whose friction is large against their inertia; docs/identification.md).")]
+    help="The same for the steering coordinates, whose reversals stick (default 4: 100 ms; 2, the chassis', "
+         "biased C_l and C_r where the friction is large against the inertia; docs/identification.md).")]
 OffsetsOpt = Annotated[bool, typer.Option("--offsets/--no-offsets",
                                           help="Estimate constant motor-torque offsets with the parameters.")]
 SegmentsOpt = Annotated[Optional[str], typer.Option(
@@ -94,7 +94,7 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
 
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
-              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0, steering_guard: float = 2.0,
+              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0, steering_guard: float = 4.0,
               max_inflation: float = 100.0, max_relative_std: float = 0.5,
               slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = UNCERTAINTY,
               bandwidth: Optional[int] = None, unexcited: Optional[str] = None,
@@ -179,7 +179,7 @@ def identify(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 4.0,
     offsets: OffsetsOpt = True,
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,
@@ -275,7 +275,7 @@ def validate(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 4.0,
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
@@ -340,7 +340,7 @@ def report(
     stiction: StictionOpt = 0.05,
     steering_stiction: SteeringStictionOpt = 0.1,
     stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 2.0,
+    steering_guard: SteeringGuardOpt = 4.0,
     offsets: OffsetsOpt = True,
     segments: SegmentsOpt = None,
     max_inflation: MaxInflationOpt = 100.0,

@@ -104,12 +104,12 @@ class IdentificationSettings:
         torque is dominated by Coulomb friction and stick/slip around reversals.
     stiction_guard : rows within ``stiction_guard / filter.cutoff`` s of a stiction row or a mode
         change are dropped too (the filter spreads each sample over about that time).
-    steering_guard : the same for the steering coordinates (default 2, as the chassis'). At a
-        steering reversal the joint sticks against 10-20x the torque its inertia needs; that step,
+    steering_guard : the same for the steering coordinates (default 4: 100 ms, since stop 23). At
+        a steering reversal the joint sticks against 10-20x the torque its inertia needs; that step,
         spread by the filter (its step response overshoots by 6.8 % at 3 / cutoff and stays within
-        5 % from 4 / cutoff on), biases C_l and C_r where the friction is large against the inertia
-        or sticks harder than it slides: 4 removes most of it, at a cost in cond and in the
-        steering stds (docs/identification.md, step 6, "Stop 23").
+        5 % from 4 / cutoff on), biased C_l and C_r with 2 by -5 to -20 % where the friction is
+        large against the inertia or sticks harder than it slides; 4 costs cond (the default
+        sequence 17.4 -> 20.8) and some of the steering stds (docs/identification.md, step 6).
     torque_offsets : estimate a constant offset of each motor-torque measurement (nuisance
         parameters shared by all logs of one identification).
     epsilon : width of the tanh Coulomb model, rad/s.
@@ -160,7 +160,7 @@ class IdentificationSettings:
     stiction_threshold: float = 0.05
     steering_threshold: float = 0.1
     stiction_guard: float = 2.0
-    steering_guard: float = 2.0
+    steering_guard: float = 4.0
     torque_offsets: bool = True
     epsilon: float = EPSILON
     torque_lead: float | None = None

@@ -85,7 +85,7 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             th = settings.threshold(coord)
             if validity:
                 keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings,
-                                      settings.noise.saturation, settings.guard(coord)).wU
+                                      settings.noise.saturation, settings.guard(coord, weights=True)).wU
                 keep = keep_w > 1e-6
             else:
                 keep = _guarded(np.abs(v) >= th, int(round(settings.guard(coord) / traj.sample_time)))

@@ -30,7 +30,7 @@ class _PhaseModel:
     sigma: float
     knee: float             # acceleration at which the row's effective variance doubles (NoiseLevels)
     threshold: float
-    guard: float            # the identification's stiction guard of the coordinate, s
+    guard: float            # the stiction guard the row weights assume, s (PlanSettings.guard)
     q_limit: float
     v_limit: float
     a_limit: float
@@ -79,7 +79,7 @@ def _phase_models(geom: Geometry, params: Parameters, floor: FloorSpace, limits:
             v_lim = min(v_lim, limits.wheel_speed / wheel)
         out.append(_PhaseModel(name, mode, coordinate, alpha, P, settings.noise.of(coordinate),
                                settings.noise.knee(coordinate), settings.threshold(coordinate),
-                               settings.guard(coordinate), q_lim, v_lim, a_lim, K,
+                               settings.guard(coordinate, weights=True), q_lim, v_lim, a_lim, K,
                                limits.motor_torque * limits.feedforward_share))
     return out
 

@@ -137,7 +137,11 @@ class PlanSettings:
     steering_threshold, stiction_threshold, stiction_guard, steering_guard : the identification's
         stiction thresholds (rad/s steering; m/s, rad/s chassis) and guards (s, chassis and steering)
         used to predict which rows it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05,
-        2 / 40 rad/s for both).
+        2 / 40 rad/s, 4 / 40 rad/s), in the exact evaluation (``evaluate_sequence``: cond and stds).
+    steering_weights_guard : the steering guard the optimiser's smooth row weights assume (s), 0.05:
+        shorter than the identification's, so its reversal model counts the rows 50-100 ms after a
+        reversal as contaminated and avoids them; with 0.1 s its plans were worse on the prototype
+        (docs/planning.md, "Stop 23: a longer guard").
     validity : rows count in the objective from ``validity`` times the threshold on (smooth step
         of relative width ``validity_width``): slow motion is where the friction model is least true.
     band_penalty : weight of the share of the phases' time spent below that speed.
@@ -182,7 +186,8 @@ class PlanSettings:
     steering_threshold: float = 0.1
     stiction_threshold: float = 0.05
     stiction_guard: float = 0.05
-    steering_guard: float = 0.05
+    steering_guard: float = 0.1
+    steering_weights_guard: float = 0.05
     validity: float = 2.0
     validity_width: float = 0.15
     band_penalty: float = 0.5
@@ -218,8 +223,8 @@ class PlanSettings:
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number > 0")
-        for key in ("stiction_guard", "steering_guard", "pause", "reference_penalty", "band_penalty",
-                    "reversal_window", "reversal_penalty"):
+        for key in ("stiction_guard", "steering_guard", "steering_weights_guard", "pause", "reference_penalty",
+                    "band_penalty", "reversal_window", "reversal_penalty"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number >= 0")
@@ -258,9 +263,12 @@ class PlanSettings:
     def threshold(self, coordinate: str) -> float:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
 
-    def guard(self, coordinate: str) -> float:
-        """The identification's stiction guard of ``coordinate``, s."""
-        return self.steering_guard if coordinate.startswith("alpha") else self.stiction_guard
+    def guard(self, coordinate: str, weights: bool = False) -> float:
+        """The identification's stiction guard of ``coordinate``, s (``weights``: the one the optimiser's
+        row weights assume)."""
+        if not coordinate.startswith("alpha"):
+            return self.stiction_guard
+        return self.steering_weights_guard if weights else self.steering_guard
 
 
 #: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``wide``: the
