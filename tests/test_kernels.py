@@ -85,7 +85,7 @@ def test_modes_equal_the_rules_on_numpy(log):
     assert set(np.unique(mode)) >= {int(Mode.PARKING), int(Mode.STRAIGHT), int(Mode.ROTATION)}
 
 
-@pytest.mark.parametrize("steering_guard", [SETTINGS.steering_guard, 4.0])
+@pytest.mark.parametrize("steering_guard", [2.0, 4.0])  # the chassis' guard, and the steering's default
 def test_projection_mask_and_guard_equal_projected_block(log, steering_guard):
     settings = dataclasses.replace(SETTINGS, steering_guard=steering_guard)
     st = filtered_stretch(PROTOTYPE, log, 0, len(log.t), settings)
@@ -94,7 +94,7 @@ def test_projection_mask_and_guard_equal_projected_block(log, steering_guard):
     usable[len(usable) // 3: len(usable) // 3 + 40] = False  # a hole: the guard acts inside a run
     mine = np.ones(st.n, dtype=bool)
     guards = {c: int(round(settings.seconds(g) / st.dt)) for c, g in settings.guards().items()}
-    assert guards["alpha_l"] == round(steering_guard / 2) * guards["x_ch"] > 0  # the steering's own guard
+    assert guards["x_ch"] == 25 and guards["alpha_l"] == round(12.5 * steering_guard)  # 2 ms samples, 40 rad/s
     blocks = _stretch_blocks(PROTOTYPE, st, mode, av, usable, None, settings, "r", mine)
     assert blocks
     for b in blocks:

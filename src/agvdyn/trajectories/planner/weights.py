@@ -29,13 +29,13 @@ class _Weights:
 
 
 def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanSettings,
-                 saturation: float = math.inf, guard: float | None = None) -> _Weights:
+                 saturation: float, guard: float) -> _Weights:
     """Weights of the rows of a phase (``wU``: in F and in cond; ``wO``: in Omega, the rows' variance)
     and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
 
     * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
     * contamination ``k``: a row the identification keeps (more than the guard ``g`` after the
-      velocity passed ``th``; ``guard`` s, None: ``st.stiction_guard``) but within
+      velocity passed ``th``; ``guard`` s, :meth:`PlanSettings.guard`) but within
       ``reversal_window`` of a velocity reversal: there the
       stick of the reversal, spread by the zero-phase filter, is in the torques. With the
       acceleration a near the reversal, such rows have ``th + g |a| <= |v| < window |a|``
@@ -51,7 +51,7 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
     width = st.validity_width * v_ok
     wv = _sigmoid((V - v_ok) / width)
     dwv = wv * (1 - wv) / width
-    g = st.stiction_guard if guard is None else guard
+    g = guard
     d = 0.2 * th
     k1 = _sigmoid((V - th - g * A) / d)
     k2 = _sigmoid((st.reversal_window * A - V) / d)
