@@ -70,9 +70,10 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
     """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
     then the offset columns), the noise level of each row's coordinate and the row's variance
     factor (:meth:`NoiseLevels.variance_factor`); ``validity``: the optimiser's smooth weights
-    instead of the mask."""
+    instead of the mask, and its noise levels (``PlanSettings.levels``)."""
     g = traj.geometry
     n_p = 11 if with_bw else 10
+    noise = settings.levels(weights=validity)
     rows, sig, fac = [], [], []
     for seg in traj.segments:
         if seg.lifted:  # no rows of the vehicle
@@ -84,8 +85,8 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             v = seg.s_dot[:, j]
             th = settings.threshold(coord)
             if validity:
-                keep_w = _row_weights(v, seg.s_ddot[:, j], th, settings.noise.knee(coord), settings,
-                                      settings.noise.saturation, settings.guard(coord, weights=True)).wU
+                keep_w = _row_weights(v, seg.s_ddot[:, j], th, noise.knee(coord), settings,
+                                      noise.saturation, settings.guard(coord, weights=True)).wU
                 keep = keep_w > 1e-6
             else:
                 keep = _guarded(np.abs(v) >= th, int(round(settings.guard(coord) / traj.sample_time)))
@@ -95,8 +96,8 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             offs = g.i_G * H[keep, 5:, j] if settings.torque_offsets else np.zeros((int(keep.sum()), _OFFSETS))
             block = np.concatenate([Y[keep, j, :n_p], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
             rows.append(block)
-            sig.append(np.full(int(keep.sum()), settings.noise.of(coord)))
-            fac.append(settings.noise.variance_factor(coord, seg.s_ddot[keep, j]))
+            sig.append(np.full(int(keep.sum()), noise.of(coord)))
+            fac.append(noise.variance_factor(coord, seg.s_ddot[keep, j]))
     if not rows:
         return np.zeros((0, n_p + _OFFSETS)), np.zeros(0), np.zeros(0)
     return np.concatenate(rows), np.concatenate(sig), np.concatenate(fac)

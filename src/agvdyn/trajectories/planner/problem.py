@@ -77,8 +77,8 @@ def _phase_models(geom: Geometry, params: Parameters, floor: FloorSpace, limits:
             a_lim = min(limits.acceleration, settings.max_acceleration)
         if wheel > 0:
             v_lim = min(v_lim, limits.wheel_speed / wheel)
-        out.append(_PhaseModel(name, mode, coordinate, alpha, P, settings.noise.of(coordinate),
-                               settings.noise.knee(coordinate), settings.threshold(coordinate),
+        out.append(_PhaseModel(name, mode, coordinate, alpha, P, settings.weights_noise.of(coordinate),
+                               settings.weights_noise.knee(coordinate), settings.threshold(coordinate),
                                settings.guard(coordinate, weights=True), q_lim, v_lim, a_lim, K,
                                limits.motor_torque * limits.feedforward_share))
     return out
@@ -224,7 +224,7 @@ class _Problem:
         s, ds_dc = self.smooth_scale(j, c, T)
         v0, a0 = B.Cv @ c, B.Ca @ c / T
         v, a = s * v0, s * a0
-        wts = _row_weights(v, a, m.threshold, m.knee, self.settings, self.settings.noise.saturation, m.guard)
+        wts = _row_weights(v, a, m.threshold, m.knee, self.settings, self.settings.weights_noise.saturation, m.guard)
         Z = np.stack([a, v, np.sign(v), np.ones_like(v)], axis=1)
         unit = T / B.n / self.Ts
         M = unit * (Z * wts.wU[:, None]).T @ Z

@@ -51,7 +51,9 @@ class NoiseLevels:
     rows, faster motion) the growth is extrapolated: for the car-like experiment it predicts a
     B_w std of 15 % where the default plant gives 4.5-11 % (:meth:`constant`: 2.5 %, the model
     plant 3.2-4.4 %). The identification uses the levels alone as nominal noise
-    (``predicted_relative_std``). Only their ratios matter for the plan.
+    (``predicted_relative_std``). Only their ratios matter for the plan. These class defaults were
+    fitted with the identification's steering guard of 2 and are the optimiser's
+    (``PlanSettings.weights_noise``); the predictions use :meth:`calibrated`, fitted with 4.
     """
 
     alpha_l: float = 0.54
@@ -83,6 +85,16 @@ class NoiseLevels:
         inf = math.inf
         return cls(knee_alpha_l=inf, knee_alpha_r=inf, knee_alpha_v=inf, knee_x_ch=inf, knee_y_ch=inf,
                    knee_gamma_ch=inf)
+
+    @classmethod
+    def calibrated(cls) -> "NoiseLevels":
+        """The levels refitted for the identification's steering guard of 4 (since stop 23): steering
+        0.381 / 0.505 N m and one knee of 8.92 rad/s^2 (the rest as the class defaults). Fitted to the
+        jackknife stds of 146 sequences (two vehicles, seeds 0-3): RMS log(predicted / jackknife) over
+        the ten stds 0.368 -> 0.193 (docs/planning.md, "Stop 24"). :func:`evaluate_sequence` predicts
+        with them (``PlanSettings.noise``); the optimiser keeps the class defaults
+        (``PlanSettings.weights_noise``), with which its plans were better."""
+        return cls(alpha_l=0.381, alpha_r=0.505, knee_alpha_l=8.92, knee_alpha_r=8.92)
 
     def of(self, coordinate: str) -> float:
         return float(getattr(self, coordinate))
@@ -168,7 +180,13 @@ class PlanSettings:
     candidates : how many of the starts, best predicted objective first, :func:`plan` builds and
         evaluates exactly (:attr:`Plan.candidates`, about 0.3 s each) for a check on the simulator
         (:func:`agvdyn.plan_check.verify_plan`, ``agvdyn plan --verify``); 1: the best alone.
-    noise : :class:`NoiseLevels`. torque_offsets : the identification estimates motor-torque offsets.
+    noise : :class:`NoiseLevels` of the exact evaluation (the predicted cond is independent of them, the
+        predicted stds are not): :meth:`NoiseLevels.calibrated`, fitted with the identification's guards.
+    weights_noise : the levels of the optimiser's objective, the class defaults (fitted with the steering
+        guard of 2): with the calibrated ones its plans were worse on three vehicles and three plants,
+        their steeper cost of fast steering keeping the plans from the reversals that hurt on other
+        plants (docs/planning.md, "Stop 24").
+    torque_offsets : the identification estimates motor-torque offsets.
     """
 
     objective: str = "std"
@@ -207,7 +225,8 @@ class PlanSettings:
     explore_iterations: int = 80
     refine: int = 4
     candidates: int = 1
-    noise: NoiseLevels = field(default_factory=NoiseLevels)
+    noise: NoiseLevels = field(default_factory=NoiseLevels.calibrated)
+    weights_noise: NoiseLevels = field(default_factory=NoiseLevels)
     torque_offsets: bool = True
 
     def __post_init__(self) -> None:
@@ -261,6 +280,10 @@ class PlanSettings:
         for name, value in self.parameter_margins:
             out[FREE.index(name)] = float(value)
         return out
+
+    def levels(self, weights: bool = False) -> NoiseLevels:
+        """The noise levels of the exact evaluation (``weights``: of the optimiser's objective)."""
+        return self.weights_noise if weights else self.noise
 
     def threshold(self, coordinate: str) -> float:
         return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
