@@ -98,6 +98,25 @@ def test_planner_thresholds_are_the_identification_defaults():
     assert plan_.guard("alpha_l", weights=True) == plan_.steering_weights_guard < plan_.steering_guard  # see PlanSettings
 
 
+def test_predictions_use_noise_the_optimiser_weights_noise():
+    """``PlanSettings.noise`` (``NoiseLevels.calibrated``) sets the predicted stds, ``weights_noise`` (the
+    class defaults) the optimiser's phase models; the predicted cond depends on neither."""
+    st = pl.PlanSettings()
+    assert st.noise == pl.NoiseLevels.calibrated() and st.weights_noise == pl.NoiseLevels()
+    seq = identification_sequence()
+    base = pl.evaluate_sequence(seq, P)
+    doubled = dataclasses.replace(st.noise, alpha_l=2 * st.noise.alpha_l, alpha_r=2 * st.noise.alpha_r)
+    loud = pl.evaluate_sequence(seq, P, settings=dataclasses.replace(st, noise=doubled))
+    for n in ("C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr"):  # mostly from the steering rows
+        assert 1.7 * base.std[n] < loud.std[n] <= 2 * base.std[n] * (1 + 1e-9), (n, loud.std[n] / base.std[n])
+    for n in ("m_ch", "C_ch", "d_vw", "d_cw"):  # from the chassis rows
+        assert loud.std[n] == pytest.approx(base.std[n], rel=0.05), n
+    assert loud.cond == pytest.approx(base.cond)
+    other = dataclasses.replace(st, noise=doubled, weights_noise=dataclasses.replace(st.weights_noise, alpha_l=1.0))
+    models = {m.coordinate: m for m in pl._phase_models(PROTOTYPE, P, FloorSpace(5.2, 1.6), Limits(), other)}
+    assert models["alpha_l"].sigma == 1.0 and models["alpha_r"].sigma == st.weights_noise.alpha_r
+
+
 def test_prediction_of_the_default_sequence():
     """The predicted cond of the default sequence is near the one the identification reports on the
     simulator (predicted 22.0; identified 20.8-21.1 with the steering guard of 4, 17.2-17.4 with 2); the

@@ -163,8 +163,8 @@ class PlanSettings:
         their share of the time costs ``reversal_penalty`` (see :func:`_row_weights`).
     cond_target, reference_penalty : the ``std`` objective's penalties (see the module docstring),
         ``reference_penalty`` the weight of both. ``cond_target`` 5 (6 until stop 23): with the steering
-        guard of 4 the slow rows it asks for no longer bias C_l, C_r, and on three vehicles the plans
-        met the bars better on every plant (docs/planning.md, "Stop 24").
+        guard of 4 the slow rows it asks for no longer bias C_l, C_r, and on four vehicles (one held out) the
+        plans met the bars better (docs/planning.md, "Stop 24").
     margin : share of every limit the plan may use (the rest for tracking and rounding).
     peak_exponent : the optimiser scales each phase to the ``peak_exponent``-norm of its samples'
         ``|x| / limit`` (64, the default: a smooth bound a few per cent above the largest) or, inf,
@@ -183,8 +183,8 @@ class PlanSettings:
     noise : :class:`NoiseLevels` of the exact evaluation (the predicted cond is independent of them, the
         predicted stds are not): :meth:`NoiseLevels.calibrated`, fitted with the identification's guards.
     weights_noise : the levels of the optimiser's objective, the class defaults (fitted with the steering
-        guard of 2): with the calibrated ones its plans were worse on three vehicles and three plants,
-        their steeper cost of fast steering keeping the plans from the reversals that hurt on other
+        guard of 2): with the calibrated ones the plans were worse on three vehicles and three plants; the
+        defaults' steeper cost of fast steering keeps the plans from the reversals that hurt on other
         plants (docs/planning.md, "Stop 24").
     torque_offsets : the identification estimates motor-torque offsets.
     """
