@@ -67,6 +67,11 @@ _NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "
                  "wheel_jump_rate")
 
 
+def _per_coordinate(chassis: float, steering: float) -> dict[str, float]:
+    """``chassis`` for each chassis coordinate name, ``steering`` for each steering one."""
+    return {**dict.fromkeys(CHASSIS_COORDINATES, chassis), **dict.fromkeys(STEERING_COORDINATES, steering)}
+
+
 @dataclass(frozen=True)
 class IdentificationSettings:
     """Settings of :func:`agvdyn.identification.identify` (all tuning constants in one frozen place).
@@ -235,13 +240,11 @@ class IdentificationSettings:
 
     def thresholds(self) -> dict[str, float]:
         """Stiction threshold of each generalized coordinate name."""
-        steering = dict.fromkeys(STEERING_COORDINATES, self.steering_threshold)
-        return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_threshold), **steering}
+        return _per_coordinate(self.stiction_threshold, self.steering_threshold)
 
     def guards(self) -> dict[str, float]:
         """Stiction guard (multiples of ``1 / filter.cutoff``) of each generalized coordinate name."""
-        steering = dict.fromkeys(STEERING_COORDINATES, self.steering_guard)
-        return {**dict.fromkeys(CHASSIS_COORDINATES, self.stiction_guard), **steering}
+        return _per_coordinate(self.stiction_guard, self.steering_guard)
 
     def seconds(self, multiple: float) -> float:
         """``multiple / filter.cutoff``: a time in units of the filter's time constant, s."""

@@ -34,12 +34,12 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
     and the penalty per second (``pen``), smooth in the velocity v and acceleration a.
 
     * validity ``wv``: a smooth step at ``validity`` times the stiction threshold ``th``;
-    * contamination ``k``: a row the identification keeps (more than the guard ``g`` after the
-      velocity passed ``th``; ``guard`` s, :meth:`PlanSettings.guard`) but within
+    * contamination ``k``: a row the identification keeps (more than ``guard`` s after the
+      velocity passed ``th``, :meth:`PlanSettings.guard`) but within
       ``reversal_window`` of a velocity reversal: there the
       stick of the reversal, spread by the zero-phase filter, is in the torques. With the
-      acceleration a near the reversal, such rows have ``th + g |a| <= |v| < window |a|``
-      (empty for slow reversals, ``|a| < th / (window - g)``). They earn no credit and cost
+      acceleration a near the reversal, such rows have ``th + guard |a| <= |v| < window |a|``
+      (empty for slow reversals, ``|a| < th / (window - guard)``). They earn no credit and cost
       ``reversal_penalty`` per share of the time;
     * the time below the validity speed costs ``band_penalty`` per share;
     * the row's variance factor ``q = 1 + g / (1 + g / saturation)``, ``g = (a / knee)^4``
@@ -51,15 +51,14 @@ def _row_weights(v: np.ndarray, a: np.ndarray, th: float, knee: float, st: PlanS
     width = st.validity_width * v_ok
     wv = _sigmoid((V - v_ok) / width)
     dwv = wv * (1 - wv) / width
-    g = guard
     d = 0.2 * th
-    k1 = _sigmoid((V - th - g * A) / d)
+    k1 = _sigmoid((V - th - guard * A) / d)
     k2 = _sigmoid((st.reversal_window * A - V) / d)
     k = k1 * k2
     dk1 = k1 * (1 - k1) / d
     dk2 = k2 * (1 - k2) / d
     k_V = dk1 * k2 - k1 * dk2
-    k_A = -g * dk1 * k2 + st.reversal_window * k1 * dk2
+    k_A = -guard * dk1 * k2 + st.reversal_window * k1 * dk2
     if math.isfinite(knee):
         g4 = (a / knee) ** 4
         den = 1 + g4 / saturation
