@@ -23,6 +23,7 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 
+from agvdyn.determinacy import std_from_covariance
 from agvdyn.identifiability import triangular_factor
 
 __all__ = ["Estimator", "LeastSquares", "WeightedLeastSquares", "Robust", "Bounded", "ESTIMATORS", "make_estimator",
@@ -97,7 +98,7 @@ class Estimator(ABC):
     @property
     def std_(self) -> np.ndarray:
         self._check_fitted()
-        return np.sqrt(np.diag(self.cov_))
+        return std_from_covariance(self.cov_)[0]
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn.determinacy import std_from_covariance, std_from_information
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import triangular_factor
 from agvdyn.identification.equations import EquationBlock
@@ -130,8 +131,8 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
                                 bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
                                 replicates=settings.bootstrap_replicates, seed=settings.seed,
                                 names=free, reported=PARAMETER_NAMES, workers=workers)
-    sd_all = unc.std
-    warnings += unc.warnings
+    sd_all, bad_variances = std_from_covariance(unc.cov, free)
+    warnings += list(unc.warnings) + bad_variances
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
     # columns are reported separately
     param_cols = [i for i, n in enumerate(free) if n in PARAMETER_NAMES]
@@ -218,10 +219,7 @@ def predicted_relative_std(data: RegressionData, coef: np.ndarray, names: Sequen
         level = max(getattr(nominal, coord, 0.0), measured.get(coord, 0.0))
         if rows.size and level > 0:
             info += rows.T @ rows / level**2
-    try:
-        std = np.sqrt(np.maximum(np.diag(np.linalg.inv(info)), 0.0))
-    except np.linalg.LinAlgError:
-        std = np.full(len(names), math.inf)
+    std = std_from_information(info)[0]  # inf where the rows do not determine the parameter
     with np.errstate(divide="ignore"):
         return {n: float(s / abs(v)) if v else math.inf for n, s, v in zip(names, std, coef)}
 
@@ -284,7 +282,7 @@ def _correlation(cov: np.ndarray, names: Sequence[str], unbounded: set[str] = fr
     for k, i in enumerate(keep):
         if names[i] in unbounded:
             c[k, :] = c[:, k] = 0.0
-    d = np.sqrt(np.maximum(np.diag(c), 0.0))
+    d = std_from_covariance(c)[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         r = c / np.outer(d, d)
     r[~np.isfinite(r)] = 0.0

@@ -40,6 +40,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from agvdyn.determinacy import std_from_covariance
 from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
 from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.correlation import correlation_time
@@ -71,7 +72,9 @@ class Uncertainty:
 
     @property
     def std(self) -> np.ndarray:
-        return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+        """``sqrt(diag(cov))``; ``inf`` where a variance is negative or not finite
+        (:func:`agvdyn.determinacy.std_from_covariance`, whose warnings the fit reports)."""
+        return std_from_covariance(self.cov)[0]
 
     def quantile(self, level: float = 0.95) -> np.ndarray:
         """Two-sided ``level`` quantile of each parameter's interval ``value +- q std``: Student's t

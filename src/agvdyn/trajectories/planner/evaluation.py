@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from agvdyn.determinacy import std_from_information
 from agvdyn.dynamics import projected_regressor
 from agvdyn.kinematics import Mode, joint_motion, kinematic_model
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
@@ -132,23 +133,15 @@ def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, l
     A, sig, factor = _sequence_rows(traj, settings, with_bw=estimate_bw)
     F, U = _information(A, sig, n_p)
     Omega = _row_variance(A, sig, factor)
-    free = [i for i in range(F.shape[0]) if F[i, i] > 0]
-    std = np.full(n_p, np.inf)
+    d, cov, det, _ = std_from_information(F, Omega)
+    std = d[:n_p]
     corr: dict[str, float] = {}
-    try:
-        Finv = np.linalg.inv(F[np.ix_(free, free)])
-        cov = Finv @ Omega[np.ix_(free, free)] @ Finv
-        d = np.sqrt(np.maximum(np.diag(cov), 0))
-        for k, i in enumerate(free):
-            if i < n_p:
-                std[i] = d[k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = cov / np.outer(d, d)
-        for p_, q_ in (("d_vl", "d_cl"), ("d_vr", "d_cr"), ("d_vw", "d_cw"), ("C_r", "C_ch"), ("C_l", "C_ch")):
-            i, j = free.index(FREE.index(p_)), free.index(FREE.index(q_))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = cov / np.outer(d, d)
+    for p_, q_ in (("d_vl", "d_cl"), ("d_vr", "d_cr"), ("d_vw", "d_cw"), ("C_r", "C_ch"), ("C_l", "C_ch")):
+        i, j = FREE.index(p_), FREE.index(q_)
+        if not (det.undetermined[i] or det.undetermined[j]):
             corr[f"{p_}/{q_}"] = float(r[i, j])
-    except (np.linalg.LinAlgError, ValueError):
-        pass
     cond = _cond(U)
     p = params.to_vector()[:n_p]
     report = limit_report(traj, params, limits)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.optimize
 
+from agvdyn.determinacy import std_from_information
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.experiments import default_excitation
@@ -119,12 +120,9 @@ def plan(geom: Geometry = PROTOTYPE, floor: FloorSpace | str = FloorSpace(5.2, 1
     O0 = _row_variance(A0, s0, q0) + 1e-12 * np.eye(F0.shape[0])
     ref_rows, ref_sig, ref_q = _sequence_rows(reference_traj, settings, validity=True)
     Fr, _ = _information(ref_rows, ref_sig)
-    try:
-        Fri = np.linalg.inv(Fr)
-        ref_cov = Fri @ _row_variance(ref_rows, ref_sig, ref_q) @ Fri
-        ref_log = 0.5 * np.log(np.diag(ref_cov)[:10]) - np.log(np.abs(params.to_vector()[:10]))
-    except np.linalg.LinAlgError:
-        ref_log = None
+    ref_std, _, _, _ = std_from_information(Fr, _row_variance(ref_rows, ref_sig, ref_q))
+    ref_log = (np.log(ref_std[:10]) - np.log(np.abs(params.to_vector()[:10]))
+               if np.all(np.isfinite(ref_std[:10])) else None)
     rng = np.random.default_rng(settings.seed)
     lo, hi = settings.harmonics
     jobs = []

@@ -6,6 +6,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from agvdyn.determinacy import determinacy
 from agvdyn.dynamics import feedforward_torques, projected_regressor
 from agvdyn.kinematics import Mode, joint_motion, kinematic_model, nominal_steering
 from agvdyn.platform import Geometry, Parameters
@@ -261,10 +262,9 @@ class _Problem:
         ``dJ/dF = -(F^-1 H Cov + Cov H F^-1)``, ``dJ/dOmega = F^-1 H F^-1``."""
         st = self.settings
         dF, dO, dU = np.zeros_like(F), np.zeros_like(O), np.zeros_like(U)
-        try:
-            Fi = np.linalg.inv(F)
-        except np.linalg.LinAlgError:
+        if determinacy(F).undetermined.any():  # no inverse of a singular F: the worst objective
             return 1e6, dF, dO, dU
+        Fi = np.linalg.inv(F)
         Cov = Fi @ O @ Fi
         Cov = 0.5 * (Cov + Cov.T)
         if st.objective == "d-optimal":
