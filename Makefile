@@ -11,6 +11,11 @@ EXPERIMENTAL := 'ignore:`[tool.setuptools.ext-modules]`'
 # sources of the optional extension agvdyn.ffcpp._core that `pip install -e` builds with CMake
 EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/src/* cpp/include/agvdyn_ff/* cpp/python/*)
 
+# The second floating-point environment of `make test`: OpenBLAS's generic Prescott kernels instead of
+# the CPU's own, numba compiled for a generic x86-64 instead of the host CPU (other rounding, other
+# optimiser paths); the tests marked `numerics` must pass under both.
+FP_ENV2 ?= OPENBLAS_CORETYPE=Prescott NUMBA_CPU_NAME=generic
+
 .PHONY: demo test bench clean cpp browser
 
 $(STAMP): pyproject.toml $(EXTENSION_SOURCES)
@@ -26,6 +31,8 @@ demo: $(STAMP)
 test: cpp browser $(STAMP)
 	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet --no-deps -e .
 	AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2
+	@echo "numerically sensitive tests (-m numerics) again under a second floating-point environment: $(FP_ENV2)"
+	$(FP_ENV2) AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2 -m numerics -p no:cacheprovider
 
 # Headless Chromium for the report's browser test (tests/test_report_browser.py): installed with apt-get
 # when missing and running as root; otherwise nothing happens here and that test skips, saying why.

@@ -16,6 +16,9 @@ from agvdyn.report import parameter_table
 from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
 from agvdyn.validation import validate
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 
 def _log(result) -> Log:
     return Log.from_frame(result.log_frame(), sidecar=result.sidecar())

@@ -26,6 +26,9 @@ from agvdyn.trajectories import (
 )
 from agvdyn.trajectories.planner import NoiseLevels, PlanSettings, evaluate_sequence
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 #: The model plant's noise: the planner's default levels grow with acceleration, calibrated on the
 #: default plant's model error over the identification motions (docs/planning.md); the car-like
 #: motion is beyond that range, and these predictions describe the plant equal to the model.

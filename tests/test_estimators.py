@@ -16,6 +16,9 @@ from agvdyn.identification.uncertainty import correlation_time, parameter_uncert
 from agvdyn.io import Log
 from agvdyn.simulation import SLIP_SCENARIO, PlantSettings, SimulationSettings, simulate
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 
 def _index(m: int, groups: np.ndarray | None = None) -> RowIndex:
     g = np.zeros(m, dtype=np.int64) if groups is None else groups

@@ -2,10 +2,14 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from agvdyn.cli import app
 from agvdyn.montecarlo import TABLE_COLUMNS, StudyCase, run_study_case, summarize
+
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
 
 
 def test_cli_writes_the_table_and_prints_the_summary(tmp_path):

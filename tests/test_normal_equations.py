@@ -20,6 +20,9 @@ from agvdyn.io import Log, read_log, write_log
 from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE
 from model_logs import identification_frame
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 SHORT = {"steer_left": 10.0, "steer_right": 10.0, "straight": 10.0, "rotation": 10.0}
 
 

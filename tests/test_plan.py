@@ -27,6 +27,10 @@ from agvdyn.trajectories import (
 )
 from agvdyn.trajectories import planner as pl
 
+#: The planner's outcome depends on the optimiser's path, hence on the floating-point kernels:
+#: ``make test`` runs this module again under a second environment (Makefile, FP_ENV2).
+pytestmark = pytest.mark.numerics
+
 P = PAPER_PARAMETERS
 
 
@@ -233,8 +237,9 @@ def test_b_w_from_car_like_motion_is_hardly_determined():
     both = Trajectory(seq.segments + tuple(lane.segments), PROTOTYPE, name="both")
     ev = pl.evaluate_sequence(both, P, settings=pl.PlanSettings(), estimate_bw=True)
     assert ev.relative_std["B_w"] > 0.2
-    assert math.isinf(pl.evaluate_sequence(seq, P, estimate_bw=True).std["B_w"]) or \
-        pl.evaluate_sequence(seq, P, estimate_bw=True).relative_std["B_w"] > 1
+    # without the car-like turns B_w is not determined at all (Table 1): infinite on every machine
+    # (the old np.linalg.inv gave 0.0 on some BLAS; tests/test_determinacy.py)
+    assert math.isinf(pl.evaluate_sequence(seq, P, estimate_bw=True).std["B_w"])
 
 
 # --- acceptance on the simulator ------------------------------------------------------------------
@@ -270,17 +275,34 @@ def test_planned_sequence_is_better_conditioned(acceptance):
         assert planned.condition_number <= 0.6 * default.condition_number
 
 
+def test_planned_sequence_predicted_stds_below_the_default(acceptance):
+    """The mechanism, on the exact evaluation (no noise): the plan's predicted std of every parameter
+    below 0.85x the default sequence's predicted std in the same floor and duration. Measured (plan
+    seed 0, this stop): largest ratio d_cl 0.726 with the host's OpenBLAS and numba kernels, 0.725 under
+    ``OPENBLAS_CORETYPE=Prescott NUMBA_CPU_NAME=generic`` (the optimiser took another path, the
+    predictions moved by 0.002); mean over the parameters 0.58."""
+    plan_, _ = acceptance
+    ratio = {n: plan_.evaluation.std[n] / plan_.reference.std[n] for n in pl.FREE}
+    assert max(ratio.values()) < 0.85, ratio
+    assert np.mean(list(ratio.values())) < 0.7, ratio
+
+
 def test_planned_sequence_stds_no_larger_than_the_default(acceptance):
-    """The plan's jackknife stds against the default sequence's, seeds 0-3: every single (seed, parameter)
-    ratio below 1 (largest d_cl 0.93) and on average clearly below (largest mean ratio d_cw 0.82, C_l
-    0.66). With the ``cond_target`` of 6 (until stop 23) C_l was 1.08x on seed 3 (docs/planning.md,
-    "Stop 24")."""
+    """The plan's jackknife stds against the default sequence's on the simulator: the mean ratio over
+    seeds 0-3 below 1 for every parameter, and below 0.8 averaged over the parameters.
+
+    Single seeds are not compared: a jackknife std scatters, and the ratio of two of them with it
+    (sd of a single seed's ratio 0.07-0.22 over seeds 0-7, largest m_ch; seed 7 gives m_ch 1.17 in
+    both floating-point environments). Measured on seeds 0-3: largest mean ratio d_cw 0.82 (host
+    kernels) / 0.85 (Prescott, generic numba; another optimiser path), the average 0.58 / 0.59; over
+    every window of four seeds in 0-7 the largest mean ratio was 0.85, 1.4 sd of a four-seed mean
+    (<= 0.11) below the bound. Until stop 25 every single (seed, parameter) ratio had to be below 1:
+    C_l 1.045 on seed 2 and d_cl 1.081 on seed 0 on two machines turned the suite red."""
     _, runs = acceptance
-    ratios = {(seed, n): p.std[n] / d.std[n] for seed, (p, d) in zip(SEEDS, runs) for n in pl.FREE}
-    above = {key: round(r, 3) for key, r in ratios.items() if r > 1}
-    assert not above, f"stds above the default sequence's: {above}"
-    mean = {n: np.mean([ratios[(s, n)] for s in SEEDS]) for n in pl.FREE}
-    assert max(mean.values()) < 0.9, mean
+    ratios = np.array([[p.std[n] / d.std[n] for n in pl.FREE] for p, d in runs])
+    mean = dict(zip(pl.FREE, ratios.mean(axis=0).round(3)))
+    assert max(mean.values()) < 1, f"mean std ratios over seeds {SEEDS}: {mean}"
+    assert ratios.mean() < 0.8, mean
 
 
 def test_predicted_stds_match_the_jackknife(acceptance):
@@ -288,7 +310,9 @@ def test_predicted_stds_match_the_jackknife(acceptance):
     ``NoiseLevels.calibrated``) against the identified jackknife std, mean over the seeds, on both
     sequences (seeds 0-3, steering guard 4): the plan 0.86-1.16, the default sequence 0.82-1.06. With the
     optimiser's levels (fitted with the guard of 2) the steering stds were 1.2-2.1x too large
-    (docs/planning.md, "Stop 24"). Never off by more than 0.7x or 1.4x."""
+    (docs/planning.md, "Stop 24"). Never off by more than 0.7x or 1.4x. Stop 25, both floating-point
+    environments: the plan 0.90-1.13 (host) / 0.83-1.12 (Prescott), the default 0.82-1.06; over every
+    window of four seeds in 0-7 0.79-1.36 (a four-seed mean of jackknife stds scatters)."""
     plan_, runs = acceptance
     for k, evaluation in ((0, plan_.evaluation), (1, plan_.reference)):
         for n in pl.FREE:

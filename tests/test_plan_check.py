@@ -16,6 +16,9 @@ from agvdyn.cli import app
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
 from agvdyn.trajectories import planner as pl
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 P = PAPER_PARAMETERS
 SRC = Path(pc.__file__).resolve().parent
 

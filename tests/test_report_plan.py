@@ -18,6 +18,9 @@ from agvdyn.report import read_plan
 from agvdyn.simulation import simulate
 from agvdyn.trajectories import planner as pl
 
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
+
 CART = Geometry(l=0.9, b=0.6, a=0.03, r=0.08, i_G=18.0, name="cart")
 
 

@@ -3,9 +3,13 @@ formulation they replace."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
 from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
+
+#: Numerically sensitive (BLAS, numba kernels): make test runs it again under FP_ENV2 (Makefile).
+pytestmark = pytest.mark.numerics
 
 
 def _spd_blocks(rng, nb, p, scale):
