@@ -29,12 +29,12 @@ from agvdyn.identification import (
 )
 from agvdyn.identification.fit import COLLINEAR_RELATIVE_STD
 from agvdyn.identification.stretches import stretch_bounds
-from agvdyn.io.summary import LogSummary, summarize_log
+from agvdyn.io.summary import LogSummary, ModeRun, summarize_log
 from agvdyn.kinematics import Mode
 from agvdyn.platform import PARAMETER_NAMES, Geometry
 from agvdyn.signals import runs
 
-__all__ = ["Excitation", "FileCheck", "Preflight", "preflight"]
+__all__ = ["Excitation", "FileCheck", "Preflight", "TimelineRow", "merge_short_runs", "preflight"]
 
 
 @dataclass(frozen=True)
@@ -58,14 +58,138 @@ class Excitation:
                 "relative_std": num(self.relative_std), "excited_by": self.excited_by}
 
 
+@dataclass(frozen=True)
+class TimelineRow:
+    """One row of a printed mode timeline: ``runs`` consecutive detected runs from ``t_start`` to
+    ``t_end`` (times of their first and last sample), ``time`` seconds in all (rows x sample time),
+    ``mode`` the label of the mode with the most time among them. ``runs > 1``: a merged row."""
+
+    mode: str
+    t_start: float
+    t_end: float
+    time: float
+    runs: int = 1
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+def _dominant(group: Sequence[TimelineRow]) -> str:
+    """The mode with the most time in ``group`` (the first of equals)."""
+    time: dict[str, float] = {}
+    for r in group:
+        time[r.mode] = time.get(r.mode, 0.0) + r.time
+    return max(time, key=time.__getitem__)
+
+
+def merge_short_runs(runs: Sequence[TimelineRow], min_run: float) -> tuple[TimelineRow, ...]:
+    """A mode timeline for people: runs shorter than ``min_run`` seconds absorbed into their neighbours.
+
+    Noise makes the mode detection flicker where alpha passes a tolerance boundary (a steering
+    test passing alpha = 0 flickers between ``1 parking`` and ``2s straight``). Runs of at least
+    ``min_run`` s (``time``) are anchors; each cluster of consecutive shorter runs between two anchors
+
+    - joins both anchors into one row when they are in the same mode (flicker between A and B
+      inside a longer A stretch becomes part of A);
+    - else is a row of its own when the cluster lasts ``min_run`` or more in all;
+    - else goes to the anchor whose mode has more time inside the cluster (the preceding on a tie).
+
+    A cluster before the first or after the last anchor goes to it (a row of its own when it lasts
+    ``min_run`` or more); without any anchor all runs are one row. Neighbouring rows of the same
+    mode are then joined. A merged row's ``mode`` is the mode with the most time inside it, ``runs``
+    the number of runs it holds, ``time`` their total. The total time and the span are kept:
+    ``sum(r.time)`` and the first start and last end do not change, and the rows stay in order
+    and do not overlap. ``min_run = 0`` returns the runs unchanged.
+
+    Example: ``1`` 4 s, ``2s`` 0.1 s, ``1`` 0.05 s, ``2s`` 0.2 s, ``1`` 3 s with ``min_run = 0.5``
+    is one row ``1`` of 7.35 s holding 5 runs.
+    """
+    if not min_run >= 0:
+        raise ValueError(f"min_run={min_run!r}: expected a number >= 0 (s)")
+    runs = tuple(runs)
+    if min_run == 0 or len(runs) < 2:
+        return runs
+    anchors = [i for i, r in enumerate(runs) if r.time >= min_run]
+    groups: list[list[TimelineRow]] = []
+    if not anchors:
+        groups.append(list(runs))
+    else:
+        pending = list(runs[:anchors[0]])  # short runs waiting for the next anchor's group
+        if sum(r.time for r in pending) >= min_run:
+            groups.append(pending)
+            pending = []
+        join_next = False
+        for k, a in enumerate(anchors):
+            if join_next:
+                groups[-1] += pending + [runs[a]]
+            else:
+                groups.append(pending + [runs[a]])
+            pending, join_next = [], False
+            end = anchors[k + 1] if k + 1 < len(anchors) else len(runs)
+            cluster = list(runs[a + 1:end])
+            if not cluster:
+                continue
+            if end == len(runs):  # after the last anchor
+                if sum(r.time for r in cluster) >= min_run:
+                    groups.append(cluster)
+                else:
+                    groups[-1] += cluster
+            elif runs[a].mode == runs[end].mode:
+                groups[-1] += cluster
+                join_next = True
+            elif sum(r.time for r in cluster) >= min_run:
+                groups.append(cluster)
+            else:
+                here = sum(r.time for r in cluster if r.mode == runs[a].mode)
+                there = sum(r.time for r in cluster if r.mode == runs[end].mode)
+                if there > here:
+                    pending = cluster
+                else:
+                    groups[-1] += cluster
+    joined: list[list[TimelineRow]] = []
+    for g in groups:
+        if joined and _dominant(joined[-1]) == _dominant(g):
+            joined[-1] += g
+        else:
+            joined.append(g)
+    return tuple(TimelineRow(_dominant(g), g[0].t_start, g[-1].t_end, sum(r.time for r in g), sum(r.runs for r in g))
+                 for g in joined)
+
+
+def _row_runs(t: np.ndarray, modes: np.ndarray, sample_time: float) -> tuple[TimelineRow, ...]:
+    """Every run of the identification's row modes (0: none) as a TimelineRow, unmerged."""
+    return tuple(TimelineRow(Mode(int(modes[a])).label if modes[a] else "none", float(t[a]), float(t[b - 1]),
+                             (b - a) * sample_time) for a, b in runs(modes))
+
+
+def _mode_rows(detected: Sequence[ModeRun], sample_time: float) -> tuple[TimelineRow, ...]:
+    return tuple(TimelineRow(f"{m.mode.label} {m.mode.name.lower()}", m.t_start, m.t_end,
+                             (m.stop - m.start) * sample_time) for m in detected)
+
+
 @dataclass(frozen=True, eq=False)
 class FileCheck:
-    """One file: its summary (eq. 9 on the raw angles, labels), the identification's rows, gaps."""
+    """One file: its summary (eq. 9 on the raw angles, labels), the identification's rows, gaps.
+
+    ``row_runs``: every run of the identification's row modes (``timeline`` is them merged as
+    ``--json`` lists them); :meth:`mode_rows` and :meth:`timeline_rows` are the printed timelines.
+    """
 
     summary: LogSummary
     rows: LogRows
     timeline: tuple[tuple[str, float, float], ...]
     gaps: tuple[str, ...]
+    row_runs: tuple[TimelineRow, ...] = ()
+
+    def mode_rows(self, min_run: float) -> tuple[TimelineRow, ...]:
+        """The runs of eq. 9 on the raw angles (every detected run), :func:`merge_short_runs`."""
+        detected = self.summary.detected or self.summary.modes
+        return merge_short_runs(_mode_rows(detected, self.summary.sample_time), min_run)
+
+    def timeline_rows(self, min_run: float) -> tuple[TimelineRow, ...]:
+        """The runs of the identification's row modes, :func:`merge_short_runs`."""
+        return merge_short_runs(self.row_runs, min_run)
 
     def to_dict(self) -> dict[str, Any]:
         out = self.summary.to_dict()
@@ -149,7 +273,8 @@ def preflight(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, fl
         all_rows.append(rows)
         _, cuts = stretch_bounds(log.t, log.alpha, log.beta, settings)
         files.append(FileCheck(summarize_log(log, geometry, tolerance=settings.mode_tolerance, min_duration=min_duration),
-                               rows, _timeline(log.t, rows.modes, min_duration), tuple(cuts)))
+                               rows, _timeline(log.t, rows.modes, min_duration), tuple(cuts),
+                               _row_runs(log.t, rows.modes, log.sample_time)))
         c = rows.counts
         if rows.slip_events:
             warnings.append(f"{rows.source}: {len(rows.slip_events)} wheel-slip events, {c.slip:,} rows dropped")

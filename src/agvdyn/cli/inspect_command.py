@@ -5,14 +5,14 @@ import json
 from pathlib import Path
 import typer
 from rich.console import Console
-from rich.table import Table
 
 from agvdyn.cli._app import app, fail
+from agvdyn.cli._tables import Column, print_items, print_table
 from agvdyn.cli.identify_commands import FixOpt, MappingOpt, PlatformOpt, _fixed
 from agvdyn.cli._defaults import MODE_TOLERANCE, STOP_TOLERANCE
 
 
-def _print_file(console: Console, check, geom, max_rows: int) -> None:
+def _print_file(console: Console, check, geom, max_rows: int, min_run: float) -> None:
     summary = check.summary
     console.print(f"[bold]{summary.path or '<log>'}[/bold]")
     console.print(f"samples   {summary.n_samples:,}")
@@ -23,36 +23,38 @@ def _print_file(console: Console, check, geom, max_rows: int) -> None:
         console.print(f"note      {note}")
     for gap in check.gaps:
         console.print(f"gap       {gap}")
+    times = [Column("start (s)"), Column("end (s)"), Column("duration (s)")]
     if summary.segments:
-        table = Table(title="segments (labels)", title_justify="left")
-        for col in ("name", "start (s)", "end (s)", "duration (s)"):
-            table.add_column(col, justify="left" if col == "name" else "right")
-        for s in summary.segments:
-            table.add_row(s.name, f"{s.t_start:.3f}", f"{s.t_end:.3f}", f"{s.duration:.3f}")
-        console.print(table)
+        print_table(console, "segments (labels)", [Column("name", "left"), *times],
+                    [[s.name, f"{s.t_start:.3f}", f"{s.t_end:.3f}", f"{s.duration:.3f}"] for s in summary.segments])
     else:
         console.print("segments  none (no segment column)")
-    title = f"motion modes detected from alpha (eq. 9, tolerance {summary.tolerance:g} rad)"
-    if summary.min_duration > 0 and summary.n_detected_runs > len(summary.modes):
-        title += (f"; {summary.n_detected_runs} detected runs, those shorter than {summary.min_duration:g} s "
-                  "merged into the preceding run")
-    table = Table(title=title, title_justify="left")
-    for col in ("mode", "start (s)", "end (s)", "duration (s)"):
-        table.add_column(col, justify="left" if col == "mode" else "right")
-    for m in summary.modes[:max_rows]:
-        table.add_row(f"{m.mode.label} {m.mode.name.lower()}", f"{m.t_start:.3f}", f"{m.t_end:.3f}", f"{m.duration:.3f}")
-    console.print(table)
-    if len(summary.modes) > max_rows:
-        console.print(f"... {len(summary.modes) - max_rows:,} more runs (--max-rows, or --json for all)")
-    totals = ", ".join(f"{k}: {v:.3f} s" for k, v in sorted(summary.mode_time.items()))
-    console.print(f"time per mode (rows x sample time)  {totals}")
-    timeline = " | ".join(f"{m} {a:.1f}-{b:.1f} s" for m, a, b in check.timeline[:max_rows])
-    console.print(f"modes the identification uses (configuration and velocities)  {timeline}")
+    detected, shown = check.mode_rows(0), check.mode_rows(min_run)
+    merged = len(shown) < len(detected)
+    print_table(console, f"motion modes detected from alpha (eq. 9, tolerance {summary.tolerance:g} rad)",
+                [Column("mode", "left"), *times] + ([Column("merged", "left")] if merged else []),
+                [[r.mode, f"{r.t_start:.3f}", f"{r.t_end:.3f}", f"{r.duration:.3f}"]
+                 + ([f"{r.runs} runs" if r.runs > 1 else ""] if merged else []) for r in shown[:max_rows]])
+    if len(shown) > max_rows:
+        console.print(f"... {len(shown) - max_rows:,} more rows (--max-rows, or --json)")
+    if merged:
+        console.print(f"merged {len(detected) - len(shown):,} of {len(detected):,} detected runs into their "
+                      f"neighbours (runs shorter than {min_run:g} s, --min-run; a merged row's mode is the one with "
+                      "the most time in it)")
+    print_items(console, "time per mode (rows x sample time):",
+                [f"{k}: {v:.3f} s" for k, v in sorted(summary.mode_time.items())])
+    timeline = check.timeline_rows(min_run)
+    print_items(console, "modes the identification uses (configuration and velocities):",
+                [f"{r.mode} {r.t_start:.1f}-{r.t_end:.1f} s" + (f" ({r.runs} runs)" if r.runs > 1 else "")
+                 for r in timeline[:max_rows]] + ([f"... {len(timeline) - max_rows:,} more"]
+                                                  if len(timeline) > max_rows else []), sep=" | ")
     c = check.rows.counts
-    console.print(f"rows      {c.used:,} of {c.samples:,} used; edges {c.edge:,}, slip {c.slip:,}, no mode {c.no_mode:,}, "
-                  f"too short {c.too_short:,}; clipped at the stops {sum(c.clipped_stop.values()):,}")
+    print_items(console, "rows     ", [f"{c.used:,} of {c.samples:,} used", f"edges {c.edge:,}", f"slip {c.slip:,}",
+                                      f"no mode {c.no_mode:,}", f"too short {c.too_short:,}",
+                                      f"clipped at the stops {sum(c.clipped_stop.values()):,}"], indent=10)
     if c.label_mismatch:
-        console.print("labels    off the detected mode: " + ", ".join(f"{k} {v:,} rows" for k, v in c.label_mismatch.items()))
+        print_items(console, "labels    off the detected mode:",
+                    [f"{k} {v:,} rows" for k, v in c.label_mismatch.items()], indent=10)
     for e in check.rows.slip_events:
         console.print(f"slip      t = {e.t_start:.3f}..{e.t_end:.3f} s, peak {e.peak_mps:.3g} m/s, wheels {', '.join(e.wheels)}")
 
@@ -67,7 +69,10 @@ def inspect(
     stop_tolerance: float = typer.Option(STOP_TOLERANCE, help="Steering angles this far beyond +-pi/2 (rad) are "
                                                                "clipped to the stop and counted; farther is an error."),
     min_duration: float = typer.Option(0.05, help="Mode runs shorter than this (s) are merged into the preceding "
-                                                  "run in the list (0: list every run)."),
+                                                  "run in the --json lists modes and mode_timeline (0: every run)."),
+    min_run: float = typer.Option(0.5, "--min-run", min=0.0, metavar="SECONDS", help=(
+        "In the printed timelines, mode runs shorter than this (s) are merged into their neighbours, the row "
+        "marked with the number of runs it holds (0: print every run). --json does not depend on it.")),
     max_rows: int = typer.Option(40, help="Longest list of mode runs printed; the rest is counted."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (keys: docs/cli.md)."),
     strict: bool = typer.Option(False, "--strict", help="Exit with code 1 when the verdict is not ready."),
@@ -93,15 +98,20 @@ def inspect(
     else:
         console = Console(highlight=False)
         for check in result.files:
-            _print_file(console, check, geom, max_rows)
+            _print_file(console, check, geom, max_rows, min_run)
             console.print()
-        table = Table(title="excitation of the parameters by the rows kept", title_justify="left")
-        for col in ("parameter", "status", "variance inflation", "relative std", "excited by"):
-            table.add_column(col, justify="right" if col in ("variance inflation", "relative std") else "left")
+        print_table(console, "excitation of the parameters by the rows kept",
+                    [Column("parameter", "left"), Column("status", "left"), Column("variance inflation"),
+                     Column("relative std")],
+                    [[e.name, e.status, "-" if e.inflation != e.inflation else f"{e.inflation:.3g}",
+                      "-" if e.relative_std != e.relative_std else f"{100 * e.relative_std:.2g} %"]
+                     for e in result.excitation])
+        excited_by: dict[str, list[str]] = {}
         for e in result.excitation:
-            table.add_row(e.name, e.status, "-" if e.inflation != e.inflation else f"{e.inflation:.3g}",
-                          "-" if e.relative_std != e.relative_std else f"{100 * e.relative_std:.2g} %", e.excited_by)
-        console.print(table)
+            excited_by.setdefault(e.excited_by, []).append(e.name)
+        for text, names in excited_by.items():
+            if text:
+                console.print(f"{', '.join(names)} excited by {text}")
         for w in result.warnings:
             console.print(f"[yellow]warning:[/yellow] {w}")
         console.print(f"[bold]verdict: {result.verdict}[/bold]")

@@ -43,6 +43,7 @@ class LogSummary:
     platform: dict[str, Any]
     min_duration: float = 0.0
     n_detected_runs: int = 0
+    detected: tuple[ModeRun, ...] = ()  # every run before merging (``modes`` with min_duration = 0)
 
     @property
     def duration(self) -> float:
@@ -58,12 +59,18 @@ class LogSummary:
             "duration": self.duration, "sample_time": self.sample_time, "rate": self.rate,
             "segments": [{"name": s.name, "start": s.t_start, "end": s.t_end, "duration": s.duration, "rows": [s.start, s.stop]}
                          for s in self.segments],
-            "modes": [{"mode": m.mode.label, "name": m.mode.name.lower(), "start": m.t_start, "end": m.t_end,
-                       "duration": m.duration, "rows": [m.start, m.stop]} for m in self.modes],
+            "modes": [_run_dict(m) for m in self.modes],
+            # every detected run, none merged (``modes`` merges those under ``min_duration``)
+            "detected_modes": [_run_dict(m) for m in (self.detected or self.modes)],
             "mode_time": self.mode_time, "mode_tolerance": self.tolerance,
             "min_duration": self.min_duration, "detected_runs": self.n_detected_runs, "notes": list(self.notes),
             "platform": self.platform,
         }
+
+
+def _run_dict(m: ModeRun) -> dict[str, Any]:
+    return {"mode": m.mode.label, "name": m.mode.name.lower(), "start": m.t_start, "end": m.t_end,
+            "duration": m.duration, "rows": [m.start, m.stop]}
 
 
 def mode_runs(geometry: Geometry, log: Log, tolerance: float = MODE_TOLERANCE) -> tuple[ModeRun, ...]:
@@ -113,4 +120,5 @@ def summarize_log(log: Log, geometry: Geometry, *, tolerance: float = MODE_TOLER
     return LogSummary(
         str(log.path) if log.path else None, log.n_samples, float(log.t[0]), float(log.t[-1]), log.sample_time,
         log.segment_runs(), runs, mode_time, tolerance, notes, geometry.to_dict(), min_duration, len(detected),
+        detected,
     )
