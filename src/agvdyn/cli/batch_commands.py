@@ -7,10 +7,13 @@ from typing import Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
+from rich.text import Text
 
 from agvdyn.cli._app import app, fail
+from agvdyn.cli._tables import Column, print_table
+from agvdyn.cli._outputs import log_inputs, refuse_overwrite
 
 
 @app.command()
@@ -43,6 +46,11 @@ def batch(
         jobs = read_manifest(manifest)
     except ManifestError as exc:
         raise fail(str(exc)) from exc
+    inputs = {"MANIFEST": manifest}
+    for job in jobs:
+        inputs.update({**log_inputs(f"job {job.name}: LOG", job.logs), f"job {job.name}: platform": job.platform,
+                       f"job {job.name}: mapping": job.mapping})
+    refuse_overwrite({"--out": out}, inputs, {"--out": "table"})
     console = Console(stderr=True)
     try:
         if quiet or as_json:
@@ -67,12 +75,12 @@ def batch(
                                "errors": {str(k): v for k, v in failed["error"].items()}}, indent=2))
         return
     if not quiet:
-        view = Table(title=f"{len(per_job)} jobs of {manifest}")
-        for col in ("job", "status", "rows", "cond", "seconds"):
-            view.add_column(col, justify="left" if col in ("job", "status") else "right")
-        for name, row in per_job.iterrows():
-            ok = row["error"] == ""
-            view.add_row(str(name), "ok" if ok else f"[red]{row['error'].splitlines()[0]}[/red]", f"{int(row['rows']):,}" if ok else "",
-                         f"{row['cond']:.4g}" if ok else "", f"{row['seconds']:.2f}")
-        Console(highlight=False).print(view)
+        view = Console(highlight=False)
+        columns = [Column("job", "left"), Column("status", "left"), Column("rows"), Column("cond"), Column("seconds")]
+        print_table(view, f"{len(per_job)} jobs of {manifest}", columns, [
+            [escape(str(name)), "ok" if ok else "[red]failed[/red]", f"{int(row['rows']):,}" if ok else "",
+             f"{row['cond']:.4g}" if ok else "", f"{row['seconds']:.2f}"]
+            for name, row in per_job.iterrows() for ok in [row["error"] == ""]])
+        for name, row in failed.iterrows():  # below the table: an error is prose, wrapped between words
+            view.print(Text(f"{name}: {row['error'].splitlines()[0]}", style="red"))
     typer.echo(f"wrote {out} ({len(table):,} rows; {len(per_job) - len(failed)} of {len(per_job)} jobs identified)")

@@ -8,9 +8,10 @@ from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 from agvdyn.cli._app import app, fail
+from agvdyn.cli._outputs import log_inputs, refuse_overwrite
+from agvdyn.cli._tables import Column, print_items, print_parameters, print_table
 from agvdyn.cli._defaults import UNCERTAINTY
 
 # The library (scipy, numba) is imported inside the functions that use it: ``agvdyn --help`` stays fast.
@@ -141,31 +142,6 @@ def _load(paths: list[Path], mapping: Optional[Path], platform: Optional[Path]):
         raise fail(str(exc)) from exc
 
 
-def _parameter_table(ident) -> Table:
-    from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, PROTOTYPE
-
-    unc = ident.uncertainty.get("method", "classic")
-    table = Table(title=f"Identified parameters ({ident.estimator}, std by {unc}; cond(Theta_1w^T Theta_1w) = "
-                        f"{ident.condition_number:.4g}, {ident.n_rows:,} rows)")
-    paper = ident.geometry.same_shape(PROTOTYPE)  # Table 2 belongs to the paper's prototype only
-    columns = ["parameter", "value", "std", "95 % interval", "std eq. 25", "unit"] + (["Table 2", "deviation"] if paper else [])
-    for col in columns:
-        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
-    for name in PARAMETER_NAMES:
-        value = getattr(ident.parameters, name)
-        if name in ident.fixed:
-            cells = [name, f"{value:.6g}", "fixed", "", "", PARAMETER_UNITS[name]]
-        else:
-            low, high = ident.ci95(name)
-            cells = [name, f"{value:.6g}", f"{ident.std[name]:.3g}", f"{low:.5g} .. {high:.5g}",
-                     f"{ident.std_classic.get(name, math.nan):.3g}", PARAMETER_UNITS[name]]
-        if paper:
-            ref = getattr(PAPER_PARAMETERS, name)
-            cells += [f"{ref:.6g}", f"{100 * (value / ref - 1):+.2f} %"]
-        table.add_row(*cells)
-    return table
-
-
 @app.command()
 def identify(
     logs: list[Path] = typer.Argument(..., metavar="LOG...", help="Identification logs (Parquet/CSV in our schema, or with --mapping)."),
@@ -202,6 +178,8 @@ def identify(
 
     Exit codes: 0 identified, 1 refused for data quality (not excited, implausible), 2 bad input.
     """
+    refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--platform": platform, "--mapping": mapping},
+                     kinds={"--out": "parameter file"})
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
                          steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
@@ -227,13 +205,13 @@ def identify(
                       f"--fix B_w={ident.B_w:.6g} on the vehicle's logs")
         console.print(f"wrote {written}")
         return
-    console.print(_parameter_table(ident))
-    console.print("residual RMS per generalized torque: " +
-                  ", ".join(f"{k} {v:.4g}" for k, v in ident.residual_rms.items()))
+    print_parameters(console, ident)
+    print_items(console, "residual RMS per generalized torque:",
+                [f"{k} {v:.4g}" for k, v in ident.residual_rms.items()])
     if ident.offsets:
-        console.print("motor-torque offsets (N m, motor side): " +
-                      ", ".join(f"{k} {v:+.4f} +- {ident.offsets_std[k]:.2g}" for k, v in ident.offsets.items()))
-    console.print(_rows_line(ident))
+        print_items(console, "motor-torque offsets (N m, motor side):",
+                    [f"{k} {v:+.4f} +- {ident.offsets_std[k]:.2g}" for k, v in ident.offsets.items()])
+    print_items(console, "rows:", _rows_items(ident), sep="; ")
     for event in ident.slip_events:
         console.print(f"wheel slip: {event.source} t = {event.t_start:.3f}..{event.t_end:.3f} s, peak "
                       f"{event.peak_mps:.3g} m/s, wheels {', '.join(event.wheels)} ({event.rows} rows)")
@@ -244,7 +222,7 @@ def identify(
     console.print(f"wrote {written}")
 
 
-def _rows_line(ident) -> str:
+def _rows_items(ident) -> list[str]:
     r = ident.rows
     parts = [f"{r.used:,} of {r.samples:,} samples used"]
     parts += [f"{n:,} {what}" for n, what in (
@@ -254,7 +232,7 @@ def _rows_line(ident) -> str:
         parts.append(f"{sum(r.clipped_stop.values()):,} clipped to the steering stops")
     if r.label_mismatch:
         parts.append("labels off the detected mode: " + ", ".join(f"{k} {v:,}" for k, v in r.label_mismatch.items()))
-    return "rows: " + "; ".join(parts)
+    return parts
 
 
 def _nan_safe(x: float) -> str:
@@ -306,13 +284,13 @@ def validate(
     if as_json:
         typer.echo(json.dumps(val.to_json_dict(), indent=2))
         return
-    table = Table(title=f"Validation on {log}: NRMSE = RMS(measured - model) / RMS(measured)")
-    for col in ("generalized coordinate", "NRMSE", "NRMSE without stiction rows", "rows", "rows moving"):
-        table.add_column(col, justify="left" if col.startswith("gen") else "right")
-    for key, row in val.table.iterrows():
-        table.add_row(str(key), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), f"{int(row['n_rows']):,}",
-                      f"{int(row['n_moving']):,}")
-    Console().print(table)
+    columns = [Column("coordinate", "left"), Column("NRMSE"), Column("NRMSE w/o stiction rows"),
+               Column("rows", drop=2), Column("rows moving", drop=1)]
+    rows = [[str(key), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), f"{int(row['n_rows']):,}",
+             f"{int(row['n_moving']):,}"] for key, row in val.table.iterrows()]
+    console = Console(highlight=False)
+    print_items(console, f"Validation on {log}:", ["NRMSE = RMS(measured - model) / RMS(measured)"])
+    print_table(console, "", columns, rows)
 
 
 @app.command()
@@ -360,6 +338,11 @@ def report(
     """
     from agvdyn.report import Outcome, command_line, make_report, read_plan, reference_from_file, write_report
 
+    outputs = {"--out": out, "--params-out": params_out}
+    kinds = {"--out": "HTML report", "--params-out": "parameter file"}
+    refuse_overwrite(outputs, {**log_inputs("--ident", ident_logs), **log_inputs("--validation", [validation]),
+                               "--reference": reference, "--plan": plan, "--platform": platform, "--mapping": mapping},
+                     kinds)
     fixed = _fixed(fix)
     settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
                          steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
@@ -381,6 +364,8 @@ def report(
                           extra_files=extra, command=command_line(), plan=plan_file)
     except ValueError as exc:
         raise fail(str(exc)) from exc
+    if rep.plan is not None and rep.plan.found == "sidecar":  # found only now, by the logs' sidecars
+        refuse_overwrite(outputs, {"plan file named by a log's sidecar": rep.plan.file.path}, kinds)
     try:
         written_params = None
         if params_out is not None and rep.identification is not None:

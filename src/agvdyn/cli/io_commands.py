@@ -8,6 +8,7 @@ import typer
 
 from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.cli._defaults import STOP_TOLERANCE
+from agvdyn.cli._outputs import LOG_AND_SIDECAR, log_inputs, refuse_overwrite, sidecar_of
 
 
 @app.command()
@@ -25,10 +26,11 @@ def convert(
     from agvdyn.io import LogError, MappingError, load_log, write_log
     from agvdyn.platform import PlatformFileError
 
+    refuse_overwrite({"--out": out, "sidecar of --out": sidecar_of(out)},
+                     {**log_inputs("INPUT", [input]), "--mapping": mapping, "--platform": platform}, LOG_AND_SIDECAR)
+
     _LOAD_ERRORS = (LogError, MappingError, PlatformFileError)
     geom = platform_option(platform) if platform is not None else None
-    if out.resolve() == input.resolve():
-        raise fail(f"{out}: the output would overwrite the input; choose another --out")
     try:
         log = load_log(input, mapping, geom, stop_tolerance=stop_tolerance)
         sidecar = dict(log.sidecar)

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agvdyn.cli._app import app, fail, platform_option
+from agvdyn.cli._outputs import refuse_overwrite
 
 #: Default of ``--verify`` (docs/planning.md, "Stop 22").
 VERIFY_DEFAULT = 4
@@ -63,7 +64,7 @@ def plan(
 ) -> None:
     """Plan the four-phase identification sequence (steer left, steer right, straight, rotation) for a floor
     and a duration, and compare it with the default sequence in the same floor."""
-    from agvdyn._files import write_text_atomically
+    from agvdyn._files import write_atomically, write_text_atomically
     from agvdyn.cli.sim_commands import _params
     from agvdyn.simulation import SimulationSettings, read_settings
     from agvdyn.trajectories import TrajectoryError
@@ -71,6 +72,9 @@ def plan(
 
     import yaml
 
+    refuse_overwrite({"--out": out, "--figure": figure},
+                     {"--platform": platform, "--params": params, "--settings": settings},
+                     {"--out": "plan", "--figure": "figure"})
     if out.suffix.lower() not in (".yaml", ".yml"):
         raise fail(f"--out {out}: unknown suffix {out.suffix!r}: expected .yaml or .yml")
     try:
@@ -119,7 +123,8 @@ def plan(
             from agvdyn.trajectories.planner import plan_figure
 
             fig = plan_figure(result)
-            fig.savefig(figure, dpi=120)
+            fmt = figure.suffix.lower().lstrip(".") or "png"  # the temporary file's suffix says nothing
+            write_atomically(figure, lambda tmp: fig.savefig(tmp, dpi=120, format=fmt))
     except (OSError, ValueError) as exc:
         raise fail(f"cannot write the plan: {exc}") from exc
     if as_json:

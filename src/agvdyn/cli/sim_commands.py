@@ -12,6 +12,7 @@ from rich.table import Table
 
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
+from agvdyn.cli._outputs import LOG_AND_SIDECAR, refuse_overwrite, sidecar_of, trajectory_input
 
 _EXPERIMENT_HELP = ("identification, lane-change, lateral, lifted-wheel, car-like, or a trajectory file (.csv / .yaml, "
                     "see docs/simulation.md).")
@@ -87,6 +88,9 @@ def simulate(
     from agvdyn.simulation import SLIP_SCENARIO, SLIP_THRESHOLD, SimulationSettings, read_settings, simulate as run
     from agvdyn.trajectories import TrajectoryError
 
+    refuse_overwrite({"--out": out, "sidecar of --out": sidecar_of(out)},
+                     {**trajectory_input(experiment), "--platform": platform, "--params": params,
+                      "--controller-params": controller_params, "--settings": settings}, LOG_AND_SIDECAR)
     try:
         sim_settings = SimulationSettings() if settings is None else read_settings(settings)
     except ValueError as exc:
@@ -156,6 +160,8 @@ def feedforward(
     from agvdyn.simulation import feedforward_table
     from agvdyn.trajectories import Limits, TrajectoryError
 
+    refuse_overwrite({"--out": out}, {**trajectory_input(experiment), "--params": params, "--platform": platform},
+                     {"--out": "table"})
     content = _parameter_file(params)
     geom, warning = platform_of_parameters(content, None if platform is None else platform_option(platform))
     if warning is not None:

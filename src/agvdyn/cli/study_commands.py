@@ -12,6 +12,7 @@ from rich.table import Table
 from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.cli._defaults import ESTIMATORS
+from agvdyn.cli._outputs import refuse_overwrite, trajectory_input
 
 
 @app.command()
@@ -43,6 +44,8 @@ def montecarlo(
     from agvdyn.identification.uncertainty import UncertaintyMethod
     from agvdyn.montecarlo import StudyCase, run_study, summarize
 
+    refuse_overwrite({"--out": out}, {**trajectory_input(experiment, "--experiment"), "--settings": settings,
+                                      "--platform": platform}, {"--out": "table"})
     if out.suffix.lower() != ".parquet":
         raise fail(f"--out {out}: expected a .parquet file")
     if runs < 2:
