@@ -73,15 +73,15 @@ def test_a_zero_column_is_undetermined():
 
 
 def test_tolerance_separates_singular_from_hardly_determined():
-    """A column 1e-4 (relative) away from another is determined; 1e-7 away is not (tolerance 1e-10 on
-    the eigenvalue, i.e. ~1e-5 on the distance of unit columns)."""
+    """A column 1e-4 (relative) away from another is determined; 1e-7 away is not (tolerance 1e-12 on
+    the eigenvalue, i.e. ~1e-6 on the distance of unit columns, as the identification's QR test)."""
     rng = np.random.default_rng(1)
     A = rng.standard_normal((400, 3))
     for gap, undetermined in ((1e-4, False), (1e-7, True)):
         B = A.copy()
         B[:, 2] = A[:, 0] + gap * rng.standard_normal(400)
         assert determinacy(B.T @ B).undetermined[[0, 2]].all() == undetermined
-    assert DETERMINACY_TOLERANCE == 1e-10
+    assert DETERMINACY_TOLERANCE == 1e-12
 
 
 def test_negative_or_non_finite_variance_is_infinite_with_a_warning():

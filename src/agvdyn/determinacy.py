@@ -7,8 +7,8 @@ planner's predictions, pre-flight trial fits, Monte Carlo studies). Each goes th
   diagonal (the W of eq. 25), and an eigenvalue at most ``tolerance`` times the largest spans an
   undetermined direction. Every parameter with a component in those directions (squared share
   above ``tolerance``) is undetermined, and so is a parameter whose column is zero. The test is
-  the same on every machine: an exactly singular F has relative eigenvalues of ~1e-16, a hardly
-  determined one (B_w from car-like turns) ~1e-6.
+  the same on every machine: an exactly singular F has relative eigenvalues of ~1e-16, the
+  hardly determined ones we know 1e-10 to 1e-6.
 * :func:`sandwich_covariance`: ``F^+ Omega F^+`` (or ``F^+``) with the pseudo-inverse on the
   determined directions only. No ``inv`` of a matrix that may be singular.
 * :func:`std_from_covariance`: ``sqrt(diag)``, ``inf`` for undetermined parameters. A negative or
@@ -27,10 +27,12 @@ __all__ = ["DETERMINACY_TOLERANCE", "Determinacy", "determinacy", "sandwich_cova
            "std_from_information"]
 
 #: Relative eigenvalue of the unit-diagonal information matrix at or below which a direction is
-#: undetermined (a unit column within 1e-5 of the span of the others). Rounding in ``A^T A`` of a
-#: million rows stays near 1e-13; the hardest determined case we know (B_w from the default
-#: sequence plus a lane change, relative std ~6) has 7e-7.
-DETERMINACY_TOLERANCE = 1e-10
+#: undetermined: a unit column within ~1e-6 of the span of the others, the identification's QR
+#: rank test (``IdentificationSettings.rank_tolerance``) squared. An exactly singular system gives
+#: ~1e-16 (B_w free on the default sequence, 40,000 rows); determined but hard cases: 1.6e-10 (all
+#: eleven from a lane change alone, variance inflation 3e9, refused by the collinearity check with
+#: its predicted std), 7e-7 (B_w from the default sequence plus a lane change, relative std ~6).
+DETERMINACY_TOLERANCE = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
