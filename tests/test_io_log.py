@@ -313,14 +313,14 @@ def test_time_in_milliseconds_is_named(tmp_path, suffix):
         read_log(path)
     text = str(err.value)
     assert f"ms{suffix}: column 't'" in text
-    assert "looks like it is in milliseconds" in text and "median time step 2 " in text
+    assert "looks like it is in milliseconds" in text and "nominal time step 2 " in text
     assert "convert 't' to seconds" in text and "time: {column: t, unit: ms}" in text
     assert "np.float64" not in text
 
 
 def test_a_step_putting_the_filter_above_nyquist_is_refused():
     frame = make_frame(n=50, dt=0.1, segments=False)  # 10 Hz: Nyquist pi/dt = 31.4 rad/s < 40 rad/s
-    with pytest.raises(LogError, match=r"median time step 0\.1 s \(10 Hz\) is too long: the 40 rad/s filter cut-off .*milliseconds"):
+    with pytest.raises(LogError, match=r"nominal time step 0\.1 s \(10 Hz\) is too long: the 40 rad/s filter cut-off .*milliseconds"):
         Log.from_frame(frame)
     Log.from_frame(make_frame(n=50, dt=0.07, segments=False))
     check_frame(frame, max_sample_time=0.2)  # settable

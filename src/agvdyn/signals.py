@@ -27,6 +27,8 @@ from enum import Enum
 
 import numpy as np
 
+from agvdyn.time_base import stamp_interval
+
 __all__ = [
     "FilterSettings",
     "DerivativeScheme",
@@ -119,15 +121,19 @@ def _padlen(order: int, normalized_cutoff: float) -> int:
 
 
 def uniform_sample_time(t: np.ndarray, *, rtol: float = 1e-3, source: str = "t", median: float | None = None) -> float:
-    """Sample time of a uniformly sampled time vector; ``ValueError`` naming the first bad row otherwise.
-    ``median``: the median time step when it is already known."""
+    """Sample time of a uniformly sampled time vector (:func:`agvdyn.time_base.stamp_interval`);
+    ``ValueError`` naming the first bad row otherwise. ``median``: the nominal time step when it is
+    already known (the name is kept for callers)."""
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 3:
         raise ValueError(f"{source}: expected a 1-D time vector with at least 3 samples, got shape {t.shape}")
     steps = np.diff(t)
-    dt = float(np.median(steps)) if median is None else float(median)
+    if median is None and not (steps > 0).all():
+        row = int(np.argmax(steps <= 0)) + 1
+        raise ValueError(f"{source}: row {row}: time step {steps[row - 1]:.6g} s, expected > 0 (strictly increasing time)")
+    dt = stamp_interval(t, source=source) if median is None else float(median)
     if not dt > 0:
-        raise ValueError(f"{source}: median time step {dt} s, expected > 0 (strictly increasing time)")
+        raise ValueError(f"{source}: nominal time step {dt} s, expected > 0 (strictly increasing time)")
     bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)
     if bad.size:
         row = int(bad[0]) + 1

@@ -2,7 +2,9 @@
 over small temporaries, one sample at a time, and releases the GIL (recordings in threads).
 
 * :func:`stretch_motion`: derivatives of the filtered angles (``np.gradient``, second order, also
-  at the ends), odometry of eq. (3) and the slip speed of each contact point, chassis
+  at the ends), odometry of eq. (3) and the slip speed of each contact point (one wheel left out,
+  :func:`agvdyn.odometry.wheel_slip_row`; from the steering rates of the lighter slip filter and
+  the raw wheel rates, so that a slip of a few tens of ms is neither smeared nor shrunk), chassis
   accelerations, the 21 entries of Theta (eq. 16) and the torques aligned to the angle instants,
   written into the padded buffer of the second zero-phase filter;
 * :func:`stretch_modes`: the motion mode of every row (eq. 9 and the rules of
@@ -23,12 +25,14 @@ import numpy as np
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn import _trig
 from agvdyn._trig import sincos_steering
+from agvdyn import odometry
 from agvdyn.kinematics import car_like_model_into, constraints, icr_state_trig, models, wheel_frame
+from agvdyn.odometry import wheel_slip_row
 
-drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__)
+drop_stale_cache(__file__, constraints.__file__, models.__file__, _trig.__file__, odometry.__file__)
 
 __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows", "recording_breaks", "copy_rows",
-           "median_and_mad", "SIGNAL_CHANNELS"]
+           "SIGNAL_CHANNELS"]
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
@@ -45,9 +49,10 @@ def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no cover - compiled
-    """Chassis velocities of eq. (3) and the slip speed per wheel of row j, as
-    ``agvdyn.odometry._odometry`` (the rows of eq. 1-2 without their zeros; same sums)."""
+def _odometry_row(j, al, ar, l, b, a, r, qd, trig, A, rhs, rates, slip_rhs, P):  # pragma: no cover - compiled
+    """Chassis velocities of eq. (3) of row j, as ``agvdyn.odometry._odometry`` (the rows of eq. 1-2
+    without their zeros; same sums); ``slip_rhs`` the right-hand side of the same rows with the
+    slip's rates ``rates`` (alpha_l_dot, alpha_r_dot, beta_dot x 4), ``P`` = ``(A_ch^T A_ch)^-1``."""
     sl, cl = sincos_steering(al)
     sr, cr = sincos_steering(ar)
     trig[j, 0], trig[j, 1], trig[j, 2], trig[j, 3] = sl, cl, sr, cr
@@ -61,6 +66,8 @@ def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no 
         steer = -side * a * sigma
         rhs[i] = 0.0
         rhs[4 + i] = -(steer * (ad0 if left else ad1)) - (-r) * qd[j, 5 + i]
+        slip_rhs[i] = 0.0
+        slip_rhs[4 + i] = -(steer * (rates[0] if left else rates[1])) - (-r) * rates[2 + i]
     m00 = m01 = m02 = m11 = m12 = m22 = 0.0
     g0 = g1 = g2 = 0.0
     for row in range(8):
@@ -86,18 +93,19 @@ def _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs):  # pragma: no 
     v1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
     v2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
     qd[j, 0], qd[j, 1], qd[j, 2] = v0, v1, v2
-    for w in range(4):
-        lat = A[w, 0] * v0 + A[w, 1] * v1 + A[w, 2] * v2 - rhs[w]
-        lon = A[4 + w, 0] * v0 + A[4 + w, 1] * v1 + A[4 + w, 2] * v2 - rhs[4 + w]
-        slip[j, w] = np.sqrt(lat * lat + lon * lon)
+    inv = 1.0 / det
+    P[0, 0], P[0, 1], P[0, 2] = c00 * inv, c01 * inv, c02 * inv
+    P[1, 0], P[1, 1], P[1, 2] = c01 * inv, c11 * inv, c12 * inv
+    P[2, 0], P[2, 1], P[2, 2] = c02 * inv, c12 * inv, c22 * inv
 
 
-def stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, scratch=None) -> None:
+def stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig,
+                   scratch=None) -> None:
     """See :func:`_stretch_motion`; the six friction entries ``tanh(q_dot / eps)`` are taken after
     the sweep by numpy's vectorised tanh on one contiguous array (``scratch`` (n, 6), optional): a
     scalar libm tanh per entry had been a third of the sweep."""
     arg = np.empty((f.shape[0], 6)) if scratch is None else scratch
-    _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, arg)
+    _stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, arg)
     np.tanh(arg, out=arg)
     _scatter_friction(arg, sig)
 
@@ -120,12 +128,15 @@ def copy_rows(dst, src):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig, arg):  # pragma: no cover
-    """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr). Writes
+def _stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig,
+                    arg):  # pragma: no cover - compiled
+    """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr), ``fast`` (n, 2)
+    the steering angles through the slip filter, ``wheels`` (n, 4) the raw wheel angles. Writes
     ``alpha`` (n, 2) clipped to the stops, ``trig`` (n, 4) their (sin, cos) left and right,
     ``qd`` (n, 9) joint velocities (chassis by odometry, eq. 3; their derivatives, the
     accelerations, enter the signals and are not kept),
-    ``slip`` (n, 4) slip speed per contact point (m/s), ``sig`` (n, 25) the entries of Theta
+    ``slip`` (n, 4) slip speed per contact point (m/s; rates of ``fast`` and ``wheels``, angles of
+    ``f``), ``sig`` (n, 25) the entries of Theta
     (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and the torques ``(1 - lead) m[k] + lead m[k-1]``.
 
     One sweep over the rows: row k's velocities and odometry, row k - 2's accelerations (their
@@ -137,6 +148,10 @@ def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip,
     per_eps = 1.0 / eps
     A = np.empty((8, 3))
     rhs = np.empty(8)
+    slip_rhs = np.empty(8)
+    e = np.empty(8)
+    P = np.empty((3, 3))
+    rates = np.empty(6)
     qdd = np.empty(9)
     for k in range(n + 2):
         if k < n:
@@ -146,7 +161,12 @@ def _stretch_motion(f, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip,
             al = min(max(f[j, 0], -half_pi), half_pi)
             ar = min(max(f[j, 1], -half_pi), half_pi)
             alpha[j, 0], alpha[j, 1] = al, ar
-            _odometry_row(j, al, ar, l, b, a, r, qd, slip, trig, A, rhs)
+            for c in range(2):
+                rates[c] = _derivative(fast, j, c, dt, half_rate)
+            for c in range(4):
+                rates[2 + c] = _derivative(wheels, j, c, dt, half_rate)
+            _odometry_row(j, al, ar, l, b, a, r, qd, trig, A, rhs, rates, slip_rhs, P)
+            wheel_slip_row(A, P, slip_rhs, e, slip, j)
         j = k - 2
         if j < 0:
             continue
@@ -373,14 +393,3 @@ def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step
         if k:
             count += 1
     return count
-
-
-@numba.njit(cache=True, nogil=True)
-def median_and_mad(x):  # pragma: no cover - compiled
-    """``(median(x), median(|x - median(x)|))`` of a 1-D array, as numpy's, without the GIL (two
-    medians of a log's slip speeds held it ~1 ms per log while another thread waited)."""
-    m = np.median(x)
-    dev = np.empty_like(x)
-    for i in range(x.size):
-        dev[i] = abs(x[i] - m)
-    return m, np.median(dev)

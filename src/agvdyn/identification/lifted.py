@@ -36,6 +36,7 @@ from agvdyn.identification.normal import RegressionData, RowIndex
 from agvdyn.identification.uncertainty import parameter_uncertainty
 from agvdyn.platform import PARAMETER_UNITS, WHEELS, Geometry
 from agvdyn.signals import guarded_mask
+from agvdyn.time_base import stamp_interval
 
 __all__ = ["LIFTED_LABEL", "EXPERIMENTS", "LIFTED_PARAMETERS", "LiftedWheelIdentification", "is_lifted",
            "lifted_experiment", "identify_lifted"]
@@ -172,7 +173,7 @@ def _lifted_rows(log: Any, geometry: Geometry, settings: IdentificationSettings,
     labelled = None if seg is None else (np.asarray(seg) == LIFTED_LABEL)
     bounds, notes = stretch_bounds(log.t, log.alpha, log.beta, settings)
     notes = [f"{source}: {n}" for n in notes]
-    min_rows = min_stretch_rows(settings, float(np.median(np.diff(log.t))))
+    min_rows = min_stretch_rows(settings, stamp_interval(np.asarray(log.t), source=f"{source}: column 't'"))
     threshold = settings.stiction_threshold / geometry.r  # the chassis threshold as a wheel rate
     A, y, wheel, rec, step = [], [], [], [], []
     k = recording0

@@ -63,7 +63,7 @@ class Filtering(str, Enum):
 
 _NON_NEGATIVE = ("stiction_threshold", "steering_threshold", "stiction_guard", "steering_guard", "mode_tolerance",
                  "epsilon", "rank_tolerance", "sample_jitter", "rest_speed", "steering_rest_rate", "edge_guard",
-                 "slip_spread", "slip_floor", "slip_guard", "stretch_gap", "steering_jump_rate",
+                 "slip_spread", "slip_floor", "slip_guard", "slip_cutoff", "stretch_gap", "steering_jump_rate",
                  "wheel_jump_rate")
 
 
@@ -99,8 +99,14 @@ class IdentificationSettings:
     segments : segment labels whose rows are used; None: every row in a motion mode.
     slip_threshold : slip speed (m/s) above which a row is wheel slip; None: from the robust
         spread of the log's slip speed, ``median + slip_spread * 1.4826 MAD``, at least
-        ``slip_floor``. ``inf`` switches slip detection off.
+        ``slip_floor``. ``inf`` switches slip detection off. The slip speed of a row is each
+        wheel's own (one wheel left out, :func:`agvdyn.odometry.odometry_with_slip`); a tyre
+        creeps by up to ~0.02 m/s right after a disturbance, hence the floor of 0.025 m/s.
     slip_guard : rows within this time (s) of a slip row are dropped too.
+    slip_cutoff : cut-off (rad/s) of the zero-phase low-pass of the steering angles whose rates
+        enter the slip speed (at most 0.8 x Nyquist); the wheel angles enter unfiltered. Far
+        above ``filter.cutoff``: a slip of 20 ms would be smeared over 0.2 s and shrunk by the
+        regression's filter.
 
     Equation rows and regression
     ----------------------------
@@ -160,8 +166,9 @@ class IdentificationSettings:
     segments: tuple[str, ...] | None = None
     slip_threshold: float | None = None
     slip_spread: float = 10.0
-    slip_floor: float = 0.02
+    slip_floor: float = 0.025
     slip_guard: float = 0.1
+    slip_cutoff: float = 250.0
     stiction_threshold: float = 0.05
     steering_threshold: float = 0.1
     stiction_guard: float = 2.0

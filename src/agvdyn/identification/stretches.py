@@ -2,10 +2,11 @@
 
 A log is cut only where the recording is not continuous: a time step longer than a few nominal
 steps (a dropout) or an angle step no vehicle can make (two recordings joined, an encoder
-reset). Each stretch is low-passed and differentiated once, as a whole; odometry (eq. 3), the
-slip speed of the redundant rolling constraints and the entries of Theta (eq. 16) are computed
-on the filtered signals, and in PARALLEL filtering the entries of Theta and the torques are
-low-passed once more together. Segment labels, motion modes, stiction and slip are decided
+reset). Each stretch is low-passed and differentiated once, as a whole; odometry (eq. 3) and the
+entries of Theta (eq. 16) are computed on the filtered signals, the slip speed of the redundant
+rolling constraints on lighter filtered steering rates and raw wheel rates (``slip_cutoff``), and
+in PARALLEL filtering the entries of Theta and the torques are low-passed once more together.
+Segment labels, motion modes, stiction and slip are decided
 afterwards, row by row, on these filtered signals: no filter ever starts or ends at a label.
 """
 from __future__ import annotations
@@ -21,10 +22,11 @@ from agvdyn.identification._kernels import SIGNAL_CHANNELS, copy_rows, recording
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.platform import Geometry
-from agvdyn.signals import filter_design, lowpass, uniform_sample_time
+from agvdyn.signals import FilterSettings, filter_design, lowpass, uniform_sample_time
+from agvdyn.time_base import stamp_interval
 
 __all__ = ["Stretch", "stretch_bounds", "stretches_of", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
-           "torque_lead", "align_torque"]
+           "torque_lead", "align_torque", "slip_filter"]
 
 
 def log_source(log: Any) -> str:
@@ -139,11 +141,11 @@ def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings:
 
 def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings,
                  nominal: float | None = None) -> tuple[list[tuple[int, int]], list[str], float]:
-    """:func:`stretch_bounds` and the nominal (median) time step of the log (NaN for one sample;
+    """:func:`stretch_bounds` and the nominal time step of the log (:func:`agvdyn.time_base.stamp_interval`; NaN for one sample;
     ``nominal`` when it is already known)."""
     if t.size < 2:
         return [(0, t.size)], [], math.nan
-    nominal = float(np.median(np.diff(t))) if nominal is None else float(nominal)
+    nominal = stamp_interval(t, source="column 't'") if nominal is None else float(nominal)
     kind = np.empty(t.size - 1, dtype=np.int8)
     found = recording_breaks(t, alpha, beta, settings.stretch_gap * nominal, settings.steering_jump_rate * nominal,
                              settings.wheel_jump_rate * nominal, kind)
@@ -158,13 +160,20 @@ def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: I
     return list(zip(starts.tolist(), stops.tolist())), reasons, nominal
 
 
+def slip_filter(settings: IdentificationSettings, dt: float) -> FilterSettings:
+    """Low-pass of the steering angles whose rates enter the slip speed: ``slip_cutoff``, at most
+    0.8 x the Nyquist frequency of ``dt``, the regression filter's order."""
+    return FilterSettings(cutoff=min(settings.slip_cutoff, 0.8 * math.pi / dt), order=settings.filter.order)
+
+
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
                      workspace: Workspace | None = None, tag: str = "", median_step: float | None = None) -> Stretch:
     """Filter, differentiate and evaluate one stretch ``[start, stop)`` of a log once.
 
-    The angles are low-passed in one compiled pass, then :func:`._kernels.stretch_motion` takes
-    derivatives, odometry (eq. 3), slip speeds, the entries of Theta and the aligned torques in one
-    pass, written straight into the buffer of the second filter (PARALLEL: all 25 channels).
+    The angles are low-passed in one compiled pass (the steering angles once more through the
+    lighter slip filter), then :func:`._kernels.stretch_motion` takes derivatives, odometry (eq. 3),
+    slip speeds, the entries of Theta and the aligned torques in one pass, written straight into
+    the buffer of the second filter (PARALLEL: all 25 channels).
 
     ``workspace``: buffers reused from the previous log (``tag`` tells this stretch's apart from
     the log's others); the arrays are then valid until the next log. ``median_step``: the median
@@ -186,14 +195,20 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     copy_rows(angles[pad:pad + n, :2], log.alpha[sl])
     copy_rows(angles[pad:pad + n, 2:], log.beta[sl])
     f = filtfilt_in_place(sos, zi, angles, pad)
+    fast_sos, fast_zi, fast_pad = filter_design(dt, slip_filter(settings, dt))
+    fast = empty(workspace, f"fast{tag}", (n + 2 * fast_pad, 2))
+    copy_rows(fast[fast_pad:fast_pad + n], log.alpha[sl])
+    fast = filtfilt_in_place(fast_sos, fast_zi, fast, fast_pad)
     alpha, trig = empty(workspace, f"alpha{tag}", (n, 2)), empty(workspace, f"trig{tag}", (n, 4))
     slip = empty(workspace, f"slip{tag}", (n, 4))
     q_dot = empty(workspace, f"q_dot{tag}", (n, 9))
     both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS))
     middle = both[pad:pad + n]
     torque = np.asarray(log.torque[sl], dtype=float)  # a view of the log's columns: the kernel reads it strided
-    stretch_motion(f, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon), torque,
-                   torque_lead(log, settings), alpha, trig, q_dot, slip, middle,
+    wheels = empty(workspace, f"wheels{tag}", (n, 4))  # raw: the slip's wheel rates (encoders resolve 1e-4 rad)
+    copy_rows(wheels, log.beta[sl])
+    stretch_motion(f, fast, wheels, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon),
+                   torque, torque_lead(log, settings), alpha, trig, q_dot, slip, middle,
                    empty(workspace, f"tanh{tag}", (n, 6)))
     if settings.filtering is Filtering.PARALLEL:
         filtfilt_in_place(sos, zi, both, pad)

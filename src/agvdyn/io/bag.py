@@ -6,9 +6,10 @@ joints from different controllers). Every mapped signal (position of angle joint
 torque joints) is taken as its own time series and resampled by linear interpolation onto one
 uniform time base (:data:`agvdyn.io._convert.RESAMPLING_METHOD`), over the time range common
 to all signals, at ``mapping.rate`` or, by default, at the common nominal rate of the joints:
-each joint's interval is estimated from that joint's own stamps (the messages that carry it:
-slope of a line fitted through its stamps), the median over the joints is rounded to 1 us, and
-joints whose rates differ by more than :data:`RATE_SPREAD` are refused unless ``rate`` is given.
+each joint's interval is estimated from that joint's own stamps (the messages that carry it) by
+:func:`agvdyn.time_base.stamp_interval` (unbiased under jitter and dropped messages), the median
+over the joints is rounded to 1 ns, and joints whose rates differ by more than :data:`RATE_SPREAD`
+are refused unless ``rate`` is given.
 Joints split over several publishers (messages interleaved, each with its own stamps) thus give
 their own rate, not that of the interleaved message stream.
 """
@@ -38,6 +39,7 @@ from agvdyn.io._convert import (
 from agvdyn.io.log import MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, _check
 from agvdyn.io.mapping import HEADING_QUANTITIES, InputKind, LogMapping, MappingError, Stamps, gear_ratio
 from agvdyn.platform import Geometry, read_platform
+from agvdyn.time_base import fit_stamps, round_period_ns
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Suffixes of single-file bag storages; a bag directory holds metadata.yaml.
@@ -135,21 +137,6 @@ class _JointTable:
         return idx_all[order], vals_all[order]
 
 
-def _message_interval(t_ns: np.ndarray) -> float:
-    """Nominal message interval (ns) of one signal: slope of a straight line through its stamps.
-
-    Each stamp gets the index of its nominal slot (intervals counted in multiples of the
-    median interval, so dropped messages keep later slots right); the least-squares slope of
-    stamp over slot is far less sensitive to jitter than the median interval.
-    """
-    d = np.diff(t_ns).astype(np.float64)
-    med = float(np.median(d))
-    slots = np.concatenate([[0.0], np.cumsum(np.maximum(np.round(d / med), 1.0))])
-    rel = (t_ns - t_ns[0]).astype(np.float64)
-    slope = np.polyfit(slots, rel, 1)[0]
-    return float(slope)
-
-
 def read_bag(
     path: str | os.PathLike,
     mapping: LogMapping,
@@ -228,9 +215,10 @@ def read_bag(
         if (step <= 0).any():
             i = int(np.argmax(step <= 0))
             kind = "repeats" if step[i] == 0 else "goes back from"
+            hint = " (or use the bag receive times with stamps: receive in the mapping)" if time_kind == "header stamp" else ""
             raise LogError(
                 f"{path}: joint {sig.source!r}: {time_kind} of message #{idx[i + 1]} {kind} the previous one "
-                f"({t_ns[i + 1]} ns after {t_ns[i]} ns): expected strictly increasing stamps per joint"
+                f"({t_ns[i + 1]} ns after {t_ns[i]} ns): expected strictly increasing stamps per joint{hint}"
             )
         if ok.sum() < 2:
             raise LogError(f"{path}: joint {sig.source!r} ({sig.quantity}): fewer than 2 finite {sig.field} values")
@@ -238,9 +226,16 @@ def read_bag(
 
     # Each joint's interval from its own stamps (all its mapped fields), not from the message stream.
     joint_ns: dict[str, float] = {}
+    counted: list[str] = []  # joints whose interval comes from counting their stamps
     for joint in mapping.sources:
         stamps = np.unique(np.concatenate([raw_series[s.quantity][0] for s in mapping.signals if s.source == joint]))
-        joint_ns[joint] = _message_interval(stamps) if stamps.size > 1 else float("nan")
+        fit = fit_stamps(stamps, source=f"{path}: joint {joint!r}") if stamps.size > 1 else None
+        joint_ns[joint] = fit.interval if fit is not None else float("nan")
+        if fit is not None and not fit.lattice and mapping.rate is None:
+            counted.append(joint)
+    if counted:
+        notes.append(f"stamps of {', '.join(map(repr, counted))}: too few or too jittered to show their lattice: interval by "
+                     "counting the stamps, which single dropped messages would lengthen; set 'rate' in the mapping if it is known")
     intervals = np.array([v for v in joint_ns.values() if np.isfinite(v) and v > 0])
     if intervals.size == 0:
         raise LogError(f"{path}: cannot infer a sample rate from the stamps; set 'rate' in the mapping")
@@ -254,10 +249,10 @@ def read_bag(
             raise LogError(
                 f"{path}: the joints on {mapping.topic} publish at different rates ({rates}; each from its own stamps), "
                 f"more than {RATE_SPREAD:.0%} apart: there is no common time base; choose one with a top-level line "
-                f"'rate: <Hz>' in the mapping (for example rate: {1e9 / max(round(float(intervals.min()) / 1000.0) * 1000, 1):.6g}, "
+                f"'rate: <Hz>' in the mapping (for example rate: {1e9 / max(round(float(intervals.min())), 1):.6g}, "
                 "the fastest joint's)"
             )
-        period_ns = int(round(source_ns / 1000.0)) * 1000  # rounded to 1 us
+        period_ns = round_period_ns(source_ns)
         if period_ns <= 0:
             raise LogError(f"{path}: cannot infer a sample rate from the stamps; set 'rate' in the mapping")
     t0_ns = max(int(t[0]) for t, _ in raw_series.values())

@@ -18,6 +18,7 @@ import yaml
 
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
+from agvdyn.time_base import stamp_interval
 from agvdyn.io.parquet import our_parquet_columns, parquet_metadata, write_our_parquet  # noqa: F401  (re-exported)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text
 from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
@@ -152,8 +153,9 @@ class Log:
 
     @cached_property
     def sample_time(self) -> float:
-        """Nominal sample time: the median of the time steps, s."""
-        return float(np.median(np.diff(self.t)))
+        """Nominal sample time, s: :func:`agvdyn.time_base.stamp_interval` of ``t`` (the uniform step of
+        a resampled log; unbiased under jitter and dropouts otherwise)."""
+        return stamp_interval(self.t, source=f"{self.path or 'log'}: column 't'")
 
     @property
     def rate(self) -> float:
@@ -175,7 +177,7 @@ class Log:
         """Row slices (half open) of the continuous stretches of the log, in time order.
 
         The log is split wherever a time step exceeds ``max_step_samples`` times the nominal
-        (median) step: a dropout. A log without dropouts is one stretch ``slice(0, n_samples)``.
+        step (:attr:`sample_time`): a dropout. A log without dropouts is one stretch ``slice(0, n_samples)``.
         """
         cuts = self._breaks(max_step_samples) + 1
         bounds = [0, *cuts.tolist(), self.n_samples]
@@ -260,7 +262,7 @@ def read_log(
     Parameters
     ----------
     path : path of ``*.parquet`` or ``*.csv``; the sidecar ``<path>.yaml`` is read when present.
-    max_gap_samples : longest allowed time step, in nominal sample periods (median dt); default unlimited.
+    max_gap_samples : longest allowed time step, in nominal sample periods (:attr:`Log.sample_time`); default unlimited.
     stop_tolerance : rad beyond the stops +-pi/2 that is clipped (default :data:`STOP_TOLERANCE`).
 
     Raises
@@ -274,7 +276,7 @@ def read_log(
         lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
         log = Log(path, lazy, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
         object.__setattr__(log, "_block", lazy.block)
-        log.__dict__["sample_time"] = lazy.sample_time  # the checks' median step: not taken twice
+        log.__dict__["sample_time"] = lazy.sample_time  # the checks' nominal step: not taken twice
         return log
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,

@@ -177,7 +177,8 @@ class LogMapping:
     """A checked mapping file (see module docstring and ``docs/io.md``).
 
     ``rate`` (Hz) is the rate of the uniform time base bags are resampled onto (None: the
-    median message interval, rounded to 1 us); tables are resampled only when it is given.
+    joints' interval from their stamps, :func:`agvdyn.time_base.stamp_interval`, rounded to 1 ns);
+    tables are resampled only when it is given.
     ``max_gap`` (s) is the longest interval between two samples of one signal that is
     interpolated over (None: 5 nominal intervals of the source or of the time base, whichever
     is longer). ``time_column``/``time_unit`` apply to tables. ``i_G`` (optional) is the gear

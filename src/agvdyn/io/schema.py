@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 from agvdyn._lazy import pandas as pd
+from agvdyn.time_base import stamp_interval
 
 
 #: Required columns of a log, in the order of PLATFORM.md.
@@ -32,16 +33,16 @@ STEERING_LIMIT = math.pi / 2
 #: (a few mrad, PLATFORM.md); values beyond a stop by at most this much are clipped to the stop
 #: (and counted, :attr:`Log.clipped`), values further out are an error.
 STOP_TOLERANCE = 0.01
-#: Default longest allowed gap between samples, in nominal sample periods (median dt): unlimited.
+#: Default longest allowed gap between samples, in nominal sample periods (stamp_interval of t): unlimited.
 #: A log with a dropout is read; identification splits it into continuous stretches
 #: (:meth:`Log.stretches`). Pass a number to refuse gaps.
 MAX_GAP_SAMPLES = math.inf
-#: A time step longer than this many nominal steps (median dt) ends a continuous stretch.
+#: A time step longer than this many nominal steps (stamp_interval of t) ends a continuous stretch.
 STRETCH_GAP_SAMPLES = 3.0
 #: Cut-off of the zero-phase filters of the identification, rad/s (PLATFORM.md "Reference values").
 FILTER_CUTOFF = 40.0
 #: Longest plausible nominal sample time, s: at pi / 40 rad/s the filter cut-off reaches the
-#: Nyquist frequency pi / dt. A longer median step is refused (typically time in milliseconds).
+#: Nyquist frequency pi / dt. A longer nominal step is refused (typically time in milliseconds).
 MAX_SAMPLE_TIME = math.pi / FILTER_CUTOFF
 #: Suffixes of our own log files.
 LOG_SUFFIXES = (".parquet", ".csv")
@@ -100,7 +101,7 @@ def _ms_hint(column: str = "t") -> str:
 
 
 def sample_time_error(source: str, nominal: float, column: str = "t") -> str | None:
-    """Why a nominal (median) time step is implausible for a log, None when it is plausible.
+    """Why a nominal time step is implausible for a log, None when it is plausible.
 
     A step of 0.5 "s" or more looks like milliseconds (2 instead of 0.002); any step beyond
     :data:`MAX_SAMPLE_TIME` puts the 40 rad/s filter cut-off above the Nyquist frequency pi / dt.
@@ -109,10 +110,10 @@ def sample_time_error(source: str, nominal: float, column: str = "t") -> str | N
         return None
     nyquist = math.pi / nominal
     if nominal >= 0.5:
-        what = (f"the time column looks like it is in milliseconds: median time step {nominal:.6g} "
+        what = (f"the time column looks like it is in milliseconds: nominal time step {nominal:.6g} "
                 f"(as seconds {1.0 / nominal:.3g} Hz, where a vehicle log at 500 Hz steps by 0.002 s)")
     else:
-        what = (f"median time step {nominal:.6g} s ({1.0 / nominal:.4g} Hz) is too long: the {FILTER_CUTOFF:g} rad/s "
+        what = (f"nominal time step {nominal:.6g} s ({1.0 / nominal:.4g} Hz) is too long: the {FILTER_CUTOFF:g} rad/s "
                 f"filter cut-off would be above the Nyquist frequency pi/dt = {nyquist:.4g} rad/s "
                 f"(a step of at most {MAX_SAMPLE_TIME:.4g} s is needed); if the time is in milliseconds")
     return f"{source}: column '{column}': {what}: {_ms_hint(column)}"
@@ -137,7 +138,7 @@ def check_frame(
 
     Parameters
     ----------
-    max_gap_samples : longest allowed time step in nominal sample periods (median dt); default
+    max_gap_samples : longest allowed time step in nominal sample periods (stamp_interval of t); default
         unlimited (a dropout is not an error, see :meth:`Log.stretches`).
     stop_tolerance : rad beyond a stop that is clipped (default :data:`STOP_TOLERANCE`).
     max_sample_time : longest plausible nominal time step, s (default :data:`MAX_SAMPLE_TIME`).
@@ -204,7 +205,7 @@ class LazyFrame:
     """A checked log's columns before they are made a DataFrame (``Log.frame`` makes it on first
     use): ``block`` (N, 11) float64 in :data:`LOG_COLUMNS` order (column-major), read only; ``segment_codes``
     (N,) codes into :data:`SEGMENTS` (-1: no segment), None without a segment column;
-    ``sample_time`` the median time step the checks found."""
+    ``sample_time`` the nominal time step the checks found (:func:`agvdyn.time_base.stamp_interval`)."""
 
     block: np.ndarray
     segment_codes: np.ndarray | None
@@ -257,7 +258,7 @@ def _check_block(block: np.ndarray, source: str, *, max_gap_samples: float, stop
                  max_sample_time: float, csv_rows: bool, clip: bool) -> tuple[dict[str, int], float]:
     """Checks of the float columns (N, 11) in :data:`LOG_COLUMNS` order; angles within the stop
     tolerance clipped in place (``clip``). Returns the clipped rows per alpha column and the
-    nominal (median) time step."""
+    nominal time step (:func:`agvdyn.time_base.stamp_interval`)."""
     if not np.isfinite(block).all():
         for k, col in enumerate(LOG_COLUMNS):
             bad = ~np.isfinite(block[:, k])
@@ -277,10 +278,10 @@ def _check_block(block: np.ndarray, source: str, *, max_gap_samples: float, stop
             f"{source}: column 't', {_row_text(source, i + 1, csv_rows)}: {kind} time "
             f"t = {_time_text(t[i + 1])} after t = {_time_text(t[i])}: expected strictly increasing time"
         )
-    nominal = float(np.median(dt))
+    nominal = stamp_interval(t, source=f"{source}: column 't'")
     if nominal > max_sample_time:
         raise LogError(sample_time_error(source, nominal) or (
-            f"{source}: column 't': median time step {nominal:.6g} s is longer than max_sample_time = "
+            f"{source}: column 't': nominal time step {nominal:.6g} s is longer than max_sample_time = "
             f"{max_sample_time:.6g} s; {_ms_hint()}"))
     if max_gap_samples < math.inf:
         bad = dt > max_gap_samples * nominal

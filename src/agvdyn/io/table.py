@@ -36,6 +36,7 @@ from agvdyn.io.mapping import InputKind, LogMapping, MappingError, SegmentColumn
 #: wrong ``time.unit`` (seconds declared as ms, ...).
 MIN_SAMPLE_TIME = 1e-5
 from agvdyn.platform import Geometry
+from agvdyn.time_base import stamp_interval
 
 
 def read_mapped_table(
@@ -101,7 +102,8 @@ def read_mapped_table(
             f"{_time_text(t_src[i + 1] / mapping.time_unit.factor)} after {_time_text(t_src[i] / mapping.time_unit.factor)} "
             f"({mapping.time_unit.value}): expected strictly increasing time"
         )
-    _check_time_unit(path, mapping, float(np.median(dt)) if dt.size else 0.0)
+    source_step = stamp_interval(t_src, source=f"{path}: column '{mapping.time_column}'") if dt.size else 0.0
+    _check_time_unit(path, mapping, source_step)
     signals = {s.quantity: s.to_si(column(s.source), i_G) for s in mapping.signals}
 
     seg_src: np.ndarray | None = None
@@ -117,7 +119,7 @@ def read_mapped_table(
     if mapping.rate is not None:
         period = 1.0 / mapping.rate
         # Default: 5 nominal intervals of the source rows or of the time base, whichever is longer.
-        max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, float(np.median(dt)))
+        max_gap = mapping.max_gap if mapping.max_gap is not None else DEFAULT_GAP_PERIODS * max(period, source_step)
         series = {q: Series(f"column {mapping.signal(q).source!r} ({q})", t_src, v) for q, v in signals.items()}
         grid = uniform_grid(series, period)
         keep, gap_notes = gap_points(series, grid, max_gap)
@@ -144,7 +146,7 @@ def read_mapped_table(
 
 
 def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
-    """Refuse a median time step that the declared ``time.unit`` makes implausible, suggesting the unit that fits."""
+    """Refuse a nominal time step that the declared ``time.unit`` makes implausible, suggesting the unit that fits."""
     if MIN_SAMPLE_TIME <= nominal <= MAX_SAMPLE_TIME or nominal <= 0:
         return
     raw_step = nominal / mapping.time_unit.factor
@@ -161,7 +163,7 @@ def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
     raw = f" ({raw_step:.6g} {mapping.time_unit.value})" if mapping.time_unit is not TimeUnit.S else ""
     raise LogError(
         f"{path}: column '{mapping.time_column}' with time.unit: {mapping.time_unit.value}{of_mapping} "
-        f"gives a median time step of {nominal:.6g} s{raw}, {kind}{milliseconds}: {limit}; {hint} in the mapping"
+        f"gives a nominal time step of {nominal:.6g} s{raw}, {kind}{milliseconds}: {limit}; {hint} in the mapping"
     )
 
 
