@@ -217,4 +217,5 @@ def test_batch_table_fits(logs, tmp_path):
     row = [line for line in lines if line.startswith("agv-with-a-rather-long-name-07")]
     assert len(row) == 1 and f"{int(job['rows']):,}" in row[0] and f"{job['cond']:.4g}" in row[0], text
     error = table[table["job"] == "missing"]["error"].iloc[0].splitlines()[0]
-    assert " ".join(error.split()) in " ".join(text.split())  # the error in full, wrapped between words
+    # the error in full: wrapped between words, and a word longer than the line (a path) folded
+    assert "".join(error.split()) in "".join(text.split())
