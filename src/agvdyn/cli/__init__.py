@@ -12,6 +12,7 @@ from agvdyn.cli import inspect_command  # noqa: E402,F401
 from agvdyn.cli import study_commands  # noqa: E402,F401
 from agvdyn.cli import batch_commands  # noqa: E402,F401
 from agvdyn.cli import plan_commands  # noqa: E402,F401
+from agvdyn.cli import export_commands  # noqa: E402,F401
 
 
 def main() -> None:

@@ -62,6 +62,13 @@ def _tracking_table(result) -> Table:
     return table
 
 
+class _Plant(str, Enum):
+    """--engine of ``agvdyn simulate`` (agvdyn.simulation.ENGINES)."""
+
+    ours = "ours"
+    mujoco = "mujoco"
+
+
 @app.command()
 def simulate(
     experiment: str = typer.Argument(..., help=_EXPERIMENT_HELP),
@@ -80,17 +87,29 @@ def simulate(
                               "and motor torque bursts in the straight and rotation of 'identification'; "
                               "replaces a slip group of --settings; see docs/simulation.md)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar and no table."),
+    engine: _Plant = typer.Option("ours", "--engine", help="The plant: ours (tyre slip, plant.py) or mujoco (an "
+                                  "MJCF generated from --platform and --params, written beside the log as "
+                                  "<out>.mjcf.xml; see docs/simulation.md)."),
+    mjcf: Optional[Path] = typer.Option(None, "--mjcf", help="With --engine mujoco: run this MJCF (e.g. from "
+                                        "'agvdyn export') instead; it holds platform and true parameters."),
 ) -> None:
-    """Simulate an experiment in closed loop (plant with tyre slip) and write the log the sensors record."""
+    """Simulate an experiment in closed loop (plant with tyre slip, or MuJoCo) and write the log the sensors record."""
     from dataclasses import replace
 
     from agvdyn.platform import SAMPLE_TIME
     from agvdyn.simulation import SLIP_SCENARIO, SLIP_THRESHOLD, SimulationSettings, read_settings, simulate as run
     from agvdyn.trajectories import TrajectoryError
 
-    refuse_overwrite({"--out": out, "sidecar of --out": sidecar_of(out)},
+    on_mujoco = engine.value == "mujoco"
+    if mjcf is not None and not on_mujoco:
+        raise fail(f"--mjcf {mjcf}: runs on --engine mujoco only")
+    if mjcf is not None and params is not None:
+        raise fail(f"--mjcf {mjcf} holds the true parameters: give no --params {params}")
+    model_out = Path(str(out) + ".mjcf.xml") if on_mujoco else None
+    refuse_overwrite({"--out": out, "sidecar of --out": sidecar_of(out), "MJCF beside --out": model_out},
                      {**trajectory_input(experiment), "--platform": platform, "--params": params,
-                      "--controller-params": controller_params, "--settings": settings}, LOG_AND_SIDECAR)
+                      "--controller-params": controller_params, "--settings": settings, "--mjcf": mjcf},
+                     {**LOG_AND_SIDECAR, "MJCF beside --out": "model"})
     try:
         sim_settings = SimulationSettings() if settings is None else read_settings(settings)
     except ValueError as exc:
@@ -101,13 +120,14 @@ def simulate(
         sim_settings = replace(sim_settings, slip=SLIP_SCENARIO)
     geom = platform_option(platform)
     true_params = _params(params)
-    ctrl_params = _params(controller_params, true_params)
+    ctrl_params = None if controller_params is None else _params(controller_params)
     _output(out)
+    plant = {"engine": engine.value, "mjcf": mjcf}
     console = Console(stderr=True)
     try:
         if quiet:
             result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params,
-                         settings=sim_settings, seed=seed)
+                         settings=sim_settings, seed=seed, **plant)
         else:
             with Progress(TextColumn("simulating {task.description}"), BarColumn(),
                           TextColumn("{task.completed:.1f} s of motion"), TimeElapsedColumn(),
@@ -118,7 +138,7 @@ def simulate(
                     bar.update(task, completed=done * SAMPLE_TIME, total=total * SAMPLE_TIME)
 
                 result = run(experiment, platform=geom, plant_params=true_params, controller_params=ctrl_params,
-                             settings=sim_settings, seed=seed, progress=progress)
+                             settings=sim_settings, seed=seed, progress=progress, **plant)
         path = result.write(out)
     except (TrajectoryError, ValueError, OSError, FloatingPointError) as exc:
         raise fail(str(exc)) from exc
@@ -132,7 +152,8 @@ def simulate(
                           f"{int((result.slip_speed > SLIP_THRESHOLD).any(axis=1).sum())} samples above "
                           f"{SLIP_THRESHOLD} m/s "
                           "(sidecar: slip_truth)")
-    typer.echo(f"wrote {path} ({result.trajectory.n_samples:,} samples) and {path}.yaml")
+    typer.echo(f"wrote {path} ({result.trajectory.n_samples:,} samples) and {path}.yaml"
+               + (f" and {model_out}" if on_mujoco else ""))
 
 
 class _Engine(str, Enum):

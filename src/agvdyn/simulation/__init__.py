@@ -93,6 +93,9 @@ class SimulationResult:
     work: np.ndarray
     torque_burst: np.ndarray
     lifted: bool = False
+    #: ``"ours"`` or ``"mujoco"`` (ENGINES); ``vehicle`` the MuJoCo vehicle (mujoco_plant.MujocoVehicle) that ran
+    engine: str = "ours"
+    vehicle: Any = None
 
     @property
     def t(self) -> np.ndarray:
@@ -206,8 +209,9 @@ class SimulationResult:
         """YAML sidecar of the log: platform, true parameters (eq. 18 order), seed, settings, summary,
         and the true slip intervals ``slip_truth`` (above ``slip_truth_threshold`` m/s)."""
         fs = floor_space(self.trajectory)
-        return {
+        side = {
             "source": "agvdyn.simulation",
+            "engine": self.engine,
             "experiment": self.experiment,
             "platform": self.geometry.to_dict(),
             "true_parameters": self.plant_params.to_dict(),
@@ -224,12 +228,26 @@ class SimulationResult:
             "slip_truth_merge_gap": MERGE_GAP,
             "slip_truth": [s.to_dict() for s in self.slip_intervals(SLIP_THRESHOLD)],
         }
+        if self.vehicle is not None:  # MuJoCo: the engine's facts replace our plant's
+            side["plant"] = {"wheel_radii": [float(x) for x in self.vehicle.wheel_radii],
+                             "torque_limit": self.settings.plant.torque_limit}
+            side["mujoco"] = self.vehicle.facts()
+        return side
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the log (Parquet by default, CSV by suffix) and its YAML sidecar atomically."""
+        """Write the log (Parquet by default, CSV by suffix) and its YAML sidecar atomically; on MuJoCo
+        also the MJCF that ran, beside the log as ``<path>.mjcf.xml`` (sidecar: ``mujoco.mjcf``)."""
+        from agvdyn._files import write_text_atomically
         from agvdyn.io import write_log
 
-        return write_log(path, self.log_frame(), self.sidecar())
+        side = self.sidecar()
+        if self.vehicle is not None:
+            from agvdyn.simulation.mujoco_plant import MJCF_SUFFIX
+
+            model_path = Path(str(path) + MJCF_SUFFIX)
+            write_text_atomically(model_path, self.vehicle.xml)
+            side["mujoco"]["mjcf"] = model_path.name
+        return write_log(path, self.log_frame(), side)
 
 
 def _plant_facts(geom: Geometry, params: Parameters, plant: PlantSettings) -> dict[str, Any]:
@@ -267,6 +285,10 @@ def simulate(
     settings: SimulationSettings = SimulationSettings(),
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    engine: str = "ours",
+    mjcf: str | os.PathLike | None = None,
+    split: Any = None,
+    engine_options: Any = None,
 ) -> SimulationResult:
     """Simulate an experiment in closed loop and record what the vehicle's sensors see.
 
@@ -280,14 +302,29 @@ def simulate(
     settings : plant, controller, sensor and limit settings.
     seed : seed of ``numpy.random.default_rng`` for all sensor noise; equal seeds give equal logs.
     progress : called as ``progress(samples_done, samples_total)`` between chunks.
+    engine : the plant: ``"ours"`` (plant.py, tyre slip) or ``"mujoco"`` (mujoco_plant.py, generated
+        from ``platform`` and ``plant_params`` with ``split`` (mujoco_model.BodySplit) and ``engine_options``
+        (mujoco_model.EngineOptions; default wheel radii from ``settings.plant.wheel_radius_error``)).
+    mjcf : with ``engine="mujoco"``: run this MJCF file instead; its geometry and lumped parameters
+        replace ``platform`` and ``plant_params`` (which must then be left at their defaults).
 
     Raises
     ------
     LimitError : the planned trajectory breaks a limit (with ``settings.check_limits``).
     """
     Ts = settings.sample_time
+    vehicle = None
+    if engine not in ENGINES:
+        raise ValueError(f"engine={engine!r}: expected one of {ENGINES}")
+    if engine == "mujoco":
+        vehicle, platform, plant_params, settings = _mujoco_vehicle(platform, plant_params, settings, mjcf, split,
+                                                                    engine_options)
+    elif mjcf is not None or split is not None or engine_options is not None:
+        raise ValueError("mjcf, split and engine_options belong to engine='mujoco'")
     traj = _trajectory(experiment, platform, Ts)
     ctrl_params = plant_params if controller_params is None else controller_params
+    if traj.lifted and vehicle is not None:
+        raise ValueError(f"experiment {traj.name!r}: the lifted-wheel experiment runs on engine='ours' only")
     if traj.lifted:  # the single-axis experiment of sec. 7 (lifted.py)
         from agvdyn.simulation.lifted import simulate_lifted
 
@@ -302,19 +339,62 @@ def simulate(
     burst = settings.slip.burst_torques(t)
     patches = settings.slip.patch_table()
 
-    def step(k0: int, k1: int) -> None:
+    def step(k0: int, k1: int) -> None:  # our plant; MuJoCo's: mujoco_plant.mujoco_stepper
         run_chunk(k0, k1, st.c, st.g, Ts, settings.plant.substeps, st.wheel_res, st.steer_res,
                   st.u_ff, mode_d, alpha_d, alpha_dot_d, st.beta_d, beta_dot_d, st.noise.steering, st.noise.torque,
                   st.noise.torque_offset, t, burst, patches, st.pos, st.vel, st.cstate, st.work,
                   out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
                   st.energy, out["work"])
 
+    if vehicle is not None:
+        from agvdyn.simulation.mujoco_plant import mujoco_stepper
+
+        mj_energy = np.zeros((traj.n_samples, 2))
+        step = mujoco_stepper(vehicle, traj, settings, st, burst, patches, mj_energy)  # noqa: F811
     run_chunks(traj.name, traj.n_samples, Ts, st, step, progress)
+    energy = st.energy
+    if vehicle is not None:  # kinetic energy; dissipated work = motor work - change of kinetic + potential energy
+        energy = mj_energy[:, 0]
+        total = mj_energy.sum(axis=1)
+        out["work"][:, 1] = out["work"][:, 0] - (total - total[0])
     return SimulationResult(
         traj, platform, plant_params, ctrl_params, settings, seed,
         out["pos"], out["vel"], st.q_dot_d, st.beta_d, st.u_ff, out["alpha"], out["beta"],
-        out["cmd"], out["app"], out["meas"], st.energy, out["work"], burst,
+        out["cmd"], out["app"], out["meas"], energy, out["work"], burst, engine=engine, vehicle=vehicle,
     )
+
+
+#: Plants of :func:`simulate`.
+ENGINES = ("ours", "mujoco")
+
+
+def _mujoco_vehicle(platform: Geometry, plant_params: Parameters, settings: SimulationSettings, mjcf: Any,
+                    split: Any, engine_options: Any) -> tuple[Any, Geometry, Parameters, SimulationSettings]:
+    """The MuJoCo vehicle of a run, and the platform, true parameters and settings it implies (the
+    wheel radius errors of the settings are the MuJoCo wheels')."""
+    from dataclasses import replace
+
+    from agvdyn.simulation.mujoco_model import BodySplit, EngineOptions
+    from agvdyn.simulation.mujoco_plant import MujocoVehicle
+
+    if mjcf is not None:
+        if split is not None or engine_options is not None:
+            raise ValueError(f"{mjcf}: an MJCF file fixes bodies and engine options: give no split or engine_options")
+        if plant_params is not PAPER_PARAMETERS:
+            raise ValueError(f"{mjcf}: the MJCF file holds the true parameters: give no plant_params")
+        vehicle = MujocoVehicle.read(mjcf)
+        if platform is not PROTOTYPE and not platform.same_shape(vehicle.geometry):
+            raise ValueError(f"{mjcf}: its platform ({vehicle.geometry.describe()}) differs from the one given "
+                             f"({platform.describe()})")
+        errors = tuple(float(x) for x in vehicle.wheel_radii / vehicle.geometry.r - 1.0)
+    else:
+        errors = settings.plant.wheel_radius_error
+        options = engine_options or EngineOptions()
+        if options.wheel_radii is None:
+            options = replace(options, wheel_radii=tuple(platform.r * (1.0 + e) for e in errors))
+        vehicle = MujocoVehicle.generate(platform, plant_params, split=split or BodySplit(), options=options)
+    settings = replace(settings, plant=replace(settings.plant, wheel_radius_error=errors))
+    return vehicle, vehicle.geometry, vehicle.parameters, settings
 
 
 def feedforward_table(experiment: str | os.PathLike | Trajectory, params: Parameters = PAPER_PARAMETERS,
@@ -350,4 +430,4 @@ def feedforward_table(experiment: str | os.PathLike | Trajectory, params: Parame
     return pd.DataFrame(data)
 
 
-__all__ += ["TrajectoryError"]
+__all__ += ["TrajectoryError", "ENGINES"]

@@ -227,6 +227,22 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
 
 # --- closed loop ---
 
+@_jit_borrow
+def drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d,
+                 steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua, meas):
+    """Everything of sample k but the plant (shared by every plant, see :mod:`.mujoco_plant`): the
+    sensors read the plant positions ``pos`` (``alpha_m``, ``beta_m``), the controller gives the
+    commands ``u``, the drive limits them to ``lim`` and adds the burst (``ua``, what the motors
+    apply), the torque sensors measure ``meas``."""
+    read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m)
+    controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, cstate, u)
+    for i in range(4):
+        ua[i] = min(max(u[i], -lim), lim)
+        if burst[k, i] != 0.0:
+            ua[i] += burst[k, i]
+        meas[i] = ua[i] + torque_offset[i] + torque_noise[k, i]
+
+
 @_jit
 def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
               u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, steer_noise, torque_noise, torque_offset,
@@ -248,13 +264,10 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
     dt = Ts / substeps
     lim = c[_TLIM]
     n_patches = patches.shape[0]
+    meas = np.zeros(4)
     for k in range(k0, k1):
-        read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m)
-        controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, cstate, u)
-        for i in range(4):
-            ua[i] = min(max(u[i], -lim), lim)
-            if burst[k, i] != 0.0:
-                ua[i] += burst[k, i]
+        drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d,
+                     steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua, meas)
         out_pos[k] = pos
         out_vel[k] = vel
         out_alpha[k] = alpha_m
@@ -263,7 +276,7 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
         for i in range(4):
             out_cmd[k, i] = u[i]
             out_app[k, i] = ua[i]
-            out_meas[k, i] = ua[i] + torque_offset[i] + torque_noise[k, i]
+            out_meas[k, i] = meas[i]
         for j in range(substeps):
             if n_patches > 0:
                 patch_factors(c, pos, t[k] + j * dt, patches, mu_w)
