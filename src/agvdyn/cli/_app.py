@@ -23,6 +23,27 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
     return typer.Exit(code)
 
 
+def numbers_by_name(option: str, items, allowed) -> dict[str, float]:
+    """``NAME=VALUE`` items of a repeatable option as ``{name: finite float}``; a bad item is a clean
+    error naming it and what was expected."""
+    import math
+
+    allowed = list(allowed)
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in allowed:
+            raise fail(f"{option} {item!r}: expected NAME=VALUE with NAME one of {', '.join(allowed)}")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise fail(f"{option} {item!r}: {value!r} is not a number") from None
+        if not math.isfinite(out[name]):
+            raise fail(f"{option} {item!r}: expected a finite number")
+    return out
+
+
 def platform_option(path: Optional[Path]) -> Geometry:
     """The platform of a --platform option, or the built-in prototype; a bad file is a clean error."""
     from agvdyn.platform import PROTOTYPE, PlatformFileError, read_platform

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from agvdyn.cli._app import app, fail, platform_option
+from agvdyn.cli._app import app, fail, numbers_by_name, platform_option
 from agvdyn.cli._outputs import refuse_overwrite
 
 
@@ -22,16 +22,7 @@ def _split(items: Optional[List[str]]):
     """A BodySplit from ``KEY=VALUE`` items (unknown keys and bad values are named errors)."""
     from agvdyn.simulation.mujoco_model import BodySplit
 
-    allowed = list(BodySplit.__dataclass_fields__)
-    values = {}
-    for item in items or []:
-        key, sep, text = item.partition("=")
-        if not sep or key not in allowed:
-            raise fail(f"--split {item!r}: expected KEY=VALUE with KEY one of {allowed}")
-        try:
-            values[key] = float(text)
-        except ValueError:
-            raise fail(f"--split {item!r}: {text!r} is not a number") from None
+    values = numbers_by_name("--split", items, BodySplit.__dataclass_fields__)
     try:
         return BodySplit(**values)
     except ValueError as exc:

@@ -27,7 +27,7 @@ from agvdyn.odometry import odometry
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
 from agvdyn.simulation._kernels import contact_points, run_chunk, slip_speeds
 from agvdyn.simulation.controller import STATE_SIZE, ControllerSettings
-from agvdyn.simulation._setup import prepare_run, run_chunks
+from agvdyn.simulation._setup import desired_motion, prepare_run, run_chunks
 from agvdyn.simulation.plant import PlantSettings, plant_constants, run_open_loop
 from agvdyn.simulation.sensors import SensorSettings
 from agvdyn.simulation.settings import SimulationSettings, read_settings, settings_from_dict
@@ -331,11 +331,7 @@ def simulate(
         return simulate_lifted(traj, platform, plant_params, ctrl_params, settings, seed, progress)
     st = prepare_run(traj, platform, plant_params, ctrl_params, settings, seed, STATE_SIZE)
     out = st.out
-    alpha_d = np.ascontiguousarray(traj.alpha)
-    mode_d = np.ascontiguousarray(traj.mode, dtype=np.int64)
-    alpha_dot_d = np.ascontiguousarray(st.q_dot_d[:, 3:5])
-    beta_dot_d = np.ascontiguousarray(st.q_dot_d[:, 5:])
-    t = np.ascontiguousarray(traj.t, dtype=float)
+    alpha_d, mode_d, alpha_dot_d, beta_dot_d, t = desired_motion(traj, st)
     burst = settings.slip.burst_torques(t)
     patches = settings.slip.patch_table()
 

@@ -228,12 +228,14 @@ def controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_
 # --- closed loop ---
 
 @_jit_borrow
-def drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d,
-                 steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua, meas):
+def drive_sample(k, pos, vel, work, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d,
+                 beta_dot_d, steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua, meas,
+                 out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_work):
     """Everything of sample k but the plant (shared by every plant, see :mod:`.mujoco_plant`): the
     sensors read the plant positions ``pos`` (``alpha_m``, ``beta_m``), the controller gives the
     commands ``u``, the drive limits them to ``lim`` and adds the burst (``ua``, what the motors
-    apply), the torque sensors measure ``meas``."""
+    apply), the torque sensors measure ``meas``; the sample (plant state ``pos``, ``vel``, ``work``
+    at its start, sensors, torques) is recorded in row k of the ``out_*`` arrays."""
     read_sensors(pos, k, wheel_res, steer_res, steer_noise, alpha_m, beta_m)
     controller_step(g, Ts, k, alpha_m, beta_m, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, cstate, u)
     for i in range(4):
@@ -241,6 +243,17 @@ def drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alp
         if burst[k, i] != 0.0:
             ua[i] += burst[k, i]
         meas[i] = ua[i] + torque_offset[i] + torque_noise[k, i]
+    for i in range(pos.size):  # element by element: this kernel borrows its arrays (no NRT)
+        out_pos[k, i] = pos[i]
+        out_vel[k, i] = vel[i]
+    for i in range(work.size):
+        out_work[k, i] = work[i]
+    out_alpha[k, 0], out_alpha[k, 1] = alpha_m[0], alpha_m[1]
+    for i in range(4):
+        out_beta[k, i] = beta_m[i]
+        out_cmd[k, i] = u[i]
+        out_app[k, i] = ua[i]
+        out_meas[k, i] = meas[i]
 
 
 @_jit
@@ -266,17 +279,9 @@ def run_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res,
     n_patches = patches.shape[0]
     meas = np.zeros(4)
     for k in range(k0, k1):
-        drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d,
-                     steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua, meas)
-        out_pos[k] = pos
-        out_vel[k] = vel
-        out_alpha[k] = alpha_m
-        out_beta[k] = beta_m
-        out_work[k] = work
-        for i in range(4):
-            out_cmd[k, i] = u[i]
-            out_app[k, i] = ua[i]
-            out_meas[k, i] = meas[i]
+        drive_sample(k, pos, vel, work, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d,
+                     beta_dot_d, steer_noise, torque_noise, torque_offset, burst, lim, cstate, alpha_m, beta_m, u, ua,
+                     meas, out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_work)
         for j in range(substeps):
             if n_patches > 0:
                 patch_factors(c, pos, t[k] + j * dt, patches, mu_w)

@@ -40,6 +40,14 @@ class RunState:
     energy: np.ndarray
 
 
+def desired_motion(traj: Trajectory, st: RunState) -> tuple[np.ndarray, ...]:
+    """The set points of the controller as contiguous arrays: ``alpha_d`` (N, 2), ``mode_d`` (N,),
+    ``alpha_dot_d`` (N, 2), ``beta_dot_d`` (N, 4) and the sample times ``t`` (N,)."""
+    return (np.ascontiguousarray(traj.alpha), np.ascontiguousarray(traj.mode, dtype=np.int64),
+            np.ascontiguousarray(st.q_dot_d[:, 3:5]), np.ascontiguousarray(st.q_dot_d[:, 5:]),
+            np.ascontiguousarray(traj.t, dtype=float))
+
+
 def prepare_run(traj: Trajectory, platform: Geometry, plant_params: Parameters, ctrl_params: Parameters,
                 settings: Any, seed: int, state_size: int) -> RunState:
     """Plan, check the limits (``settings.check_limits``), draw the noise and set up the state."""

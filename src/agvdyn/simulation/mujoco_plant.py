@@ -27,9 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.platform import WHEELS, Geometry, Parameters
+from agvdyn.simulation import _kernels, _plant_kernels
 from agvdyn.simulation._kernels import drive_sample, patch_factors
 from agvdyn.simulation._plant_kernels import _TLIM, _jit
+from agvdyn.simulation._setup import desired_motion
+
+drop_stale_cache(__file__, _kernels.__file__, _plant_kernels.__file__)  # _begin_sample calls into both
 from agvdyn.simulation.mujoco_model import (
     BodySplit, EngineOptions, VehicleBodies, body_names, lumped_parameters, mjcf, vehicle_bodies,
 )
@@ -227,17 +232,10 @@ def _begin_sample(k, qpos, qvel, qi, vi, ai, contact, base_mu, geom_friction, c,
     u = np.zeros(4)
     ua = np.zeros(4)
     meas = np.zeros(4)
-    drive_sample(k, pos, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d,
-                 steer_noise, torque_noise, torque_offset, burst, c[_TLIM], cstate, alpha_m, beta_m, u, ua, meas)
-    out_pos[k] = pos
-    out_vel[k] = vel
-    out_alpha[k] = alpha_m
-    out_beta[k] = beta_m
-    out_work[k] = work
+    drive_sample(k, pos, vel, work, g, Ts, wheel_res, steer_res, u_ff, mode_d, alpha_d, alpha_dot_d, beta_d,
+                 beta_dot_d, steer_noise, torque_noise, torque_offset, burst, c[_TLIM], cstate, alpha_m, beta_m, u, ua,
+                 meas, out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_work)
     for i in range(4):
-        out_cmd[k, i] = u[i]
-        out_app[k, i] = ua[i]
-        out_meas[k, i] = meas[i]
         ctrl[ai[i]] = ua[i]
         work[0] += Ts * i_G * ua[i] * vel[5 + i]
     if patches.shape[0] > 0:
@@ -310,11 +308,7 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
     initial_state(model, data, np.asarray(traj.alpha[0], dtype=float))
     st.pos[2] = 0.0
     out = st.out
-    alpha_d = np.ascontiguousarray(traj.alpha)
-    mode_d = np.ascontiguousarray(traj.mode, dtype=np.int64)
-    alpha_dot_d = np.ascontiguousarray(st.q_dot_d[:, 3:5])
-    beta_dot_d = np.ascontiguousarray(st.q_dot_d[:, 5:])
-    t = np.ascontiguousarray(traj.t, dtype=float)
+    alpha_d, mode_d, alpha_dot_d, beta_dot_d, t = desired_motion(traj, st)
     i_G = float(vehicle.geometry.i_G)
     step_one = mujoco.mj_step
 
