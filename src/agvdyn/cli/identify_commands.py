@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 
-from agvdyn.cli._app import app, fail
+from agvdyn.cli._app import app, fail, numbers_by_name
 from agvdyn.cli._outputs import log_inputs, refuse_overwrite
 from agvdyn.cli._tables import Column, print_items, print_parameters, print_table
 from agvdyn.cli._defaults import UNCERTAINTY
@@ -79,19 +79,7 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
         return dict(DEFAULT_FIXED)
     if [i.strip().lower() for i in items] == ["none"]:
         return {}
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or name not in PARAMETER_NAMES:
-            raise fail(f"--fix {item!r}: expected NAME=VALUE with NAME one of {', '.join(PARAMETER_NAMES)}")
-        try:
-            out[name] = float(value)
-        except ValueError:
-            raise fail(f"--fix {item!r}: {value!r} is not a number") from None
-        if not math.isfinite(out[name]):
-            raise fail(f"--fix {item!r}: expected a finite number")
-    return out
+    return numbers_by_name("--fix", items, PARAMETER_NAMES)
 
 
 def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
