@@ -58,7 +58,7 @@ def _fake_runs(monkeypatch, plan_, stds):
     """``_run`` replaced: the default sequence gives std 1 for all ten, candidate k gives ``stds[k]``."""
     by_traj = {id(c.trajectory): s for c, s in zip(plan_.candidates, stds)}
 
-    def run(trajectory, plan, seed, settings):
+    def run(trajectory, plan, seed, settings, engine="ours"):
         std = 1.0 if trajectory is plan_.reference_trajectory else by_traj[id(trajectory)]
         values = P if trajectory is plan_.reference_trajectory else P.replace(C_r=0.97 * P.C_r)
         return SimpleNamespace(std={n: std for n in pl.FREE}, parameters=values,
@@ -158,7 +158,7 @@ def test_a_refused_candidate_is_a_failure_not_an_error(monkeypatch, two_candidat
     _fake_runs(monkeypatch, two_candidates, (0.7, 0.9))
     fake = pc._run
 
-    def run(trajectory, plan, seed, settings):
+    def run(trajectory, plan, seed, settings, engine="ours"):
         if trajectory is two_candidates.candidates[0].trajectory and seed == 8:
             raise ValueError("weakly excited data: C_r")
         return fake(trajectory, plan, seed, settings)
@@ -194,7 +194,7 @@ def test_the_score_pools_the_plants(monkeypatch, two_candidates):
     plan_ = two_candidates
     cand = [c.trajectory for c in plan_.candidates]
 
-    def run(trajectory, plan, seed, settings):
+    def run(trajectory, plan, seed, settings, engine="ours"):
         soft = settings.plant.slip_stiffness_long < 4e4
         if trajectory is plan_.reference_trajectory:
             std = 1.0
@@ -216,7 +216,7 @@ def test_the_score_pools_the_plants(monkeypatch, two_candidates):
     assert data["plants"] == [pc.NOMINAL, "soft"] and data["plant_seeds"] == [9]
     assert data["candidates"][0]["plants"]["soft"]["score"] == pytest.approx(1.4)
     # a chosen candidate above 1 on a variant is named in the warnings
-    monkeypatch.setattr(pc, "_run", lambda t, p, s, st: run(cand[0] if t is cand[1] else t, p, s, st))
+    monkeypatch.setattr(pc, "_run", lambda t, p, s, st, engine="ours": run(cand[0] if t is cand[1] else t, p, s, st))
     _, worse = pc.verify_plan(plan_, (7,), plants=("soft",), plant_seeds=(9,))
     assert any("soft plant variant" in w for w in worse.warnings)
 
@@ -296,3 +296,31 @@ def test_forked_workers_run_one_blas_thread_and_the_count_is_restored():
         assert _blas_threads() == before
         with one_blas_thread(False):
             assert _blas_threads() == before
+
+
+def test_verify_plan_on_mujoco(two_candidates):
+    """``engine="mujoco"`` (``agvdyn plan --verify-engine mujoco``): the candidates and the default sequence
+    simulated on the MuJoCo plant and identified (one seed); the engine is reported; the plant variants,
+    which are our plant's, are refused with it."""
+    pytest.importorskip("mujoco")
+    chosen, verification = pc.verify_plan(two_candidates, 1, engine="mujoco")
+    assert verification.engine == "mujoco" and verification.to_dict()["engine"] == "mujoco"
+    assert len(verification.candidates) == 2
+    for c in verification.candidates:
+        assert c.failure is None and set(c.ratio) == set(pl.FREE)
+        assert c.cond == pytest.approx(c.predicted_cond, rel=0.1)
+    assert verification.chosen_check.score == min(c.score for c in verification.candidates)
+    assert all("MuJoCo" in w for w in verification.warnings[:-1])
+    with pytest.raises(ValueError, match="our plant's"):
+        pc.verify_plan(two_candidates, 1, engine="mujoco", plants=("soft",))
+    with pytest.raises(ValueError, match="engine='gazebo'"):
+        pc.verify_plan(two_candidates, 1, engine="gazebo")
+
+
+def test_cli_plan_verify_engine_is_checked(tmp_path):
+    out = str(tmp_path / "p.yaml")
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--verify-engine", "gazebo", "--out", out])
+    assert res.exit_code == 2 and "ours or mujoco" in res.output
+    res = CliRunner().invoke(app, ["plan", "--floor", "3x2", "--verify-engine", "mujoco", "--verify-plants", "soft",
+                                   "--out", out])
+    assert res.exit_code == 2 and "our plant's" in res.output

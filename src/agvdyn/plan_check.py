@@ -27,6 +27,11 @@ worse plans on held-out seeds and plants (a variant's score on two to four seeds
 candidates differ), the pooled one the same plans as the nominal check but one (better); it is opt-in
 (``agvdyn plan --verify-plants soft,stiff``) and reports each plant's figures. The runs can go to worker processes (``workers``; ``agvdyn plan``: two).
 
+``engine="mujoco"`` (``agvdyn plan --verify-engine mujoco``) simulates the candidates and the default
+sequence on the MuJoCo plant (:mod:`agvdyn.simulation.mujoco_plant`, generated from the plan's platform and
+nominal parameters) instead of ours: the check on a second, independent engine (issue 29; the plant
+variants are our plant's and are refused with it).
+
 This is the validation stage: it imports the simulation and the identification, which the
 planner (a trajectories module) must not.
 """
@@ -43,7 +48,7 @@ import numpy as np
 
 from agvdyn.identification import Identification, identify
 from agvdyn.io import Log
-from agvdyn.simulation import PlantSettings, SimulationSettings, simulate
+from agvdyn.simulation import ENGINES, PlantSettings, SimulationSettings, simulate
 from agvdyn.trajectories.planner import FREE, Plan
 from agvdyn.trajectories.planner.optimize import one_blas_thread
 from agvdyn.trajectories.planner.result import COND_BAR, COND_SHARE
@@ -144,6 +149,7 @@ class Verification:
     elapsed: float
     plants: tuple[str, ...] = ()
     plant_seeds: tuple[int, ...] = ()
+    engine: str = "ours"
 
     @property
     def chosen_check(self) -> CandidateCheck:
@@ -154,20 +160,21 @@ class Verification:
         """What the chosen candidate misses on the simulator (mean cond above the bar, a mean std ratio
         above 1, an error beyond 5 % and 3 std on some seed)."""
         c = self.chosen_check
+        where = "MuJoCo" if self.engine == "mujoco" else "the simulator"
         if c.failure is not None:
-            return (f"measured on the simulator: every candidate failed ({c.failure})",)
+            return (f"measured on {where}: every candidate failed ({c.failure})",)
         out, bar = [], _cond_bar(self.default_cond)
         if c.cond > bar:
             on = f"seed {self.seeds[0]}" if len(self.seeds) == 1 else f"seeds {self.seeds[0]}-{self.seeds[-1]}"
-            out.append(f"measured on the simulator ({on}): cond {c.cond:.2f} above "
+            out.append(f"measured on {where} ({on}): cond {c.cond:.2f} above "
                        f"{bar:.2f} (9, or 0.6x the default sequence's {self.default_cond:.2f})")
         worse = {n: r for n, r in c.ratio.items() if r > 1}
         if worse:
-            out.append("measured on the simulator: mean std above the default sequence's for "
+            out.append(f"measured on {where}: mean std above the default sequence's for "
                        + ", ".join(f"{n} ({r:.2f}x)" for n, r in worse.items()))
         if c.error_share > 1:
             n = max(c.error, key=c.error.get)
-            out.append(f"measured on the simulator: an error beyond 5 % and 3 std (largest {n} {c.error[n]:.1f} %)")
+            out.append(f"measured on {where}: an error beyond 5 % and 3 std (largest {n} {c.error[n]:.1f} %)")
         for p, m in c.plants.items():
             if m["score"] > 1:
                 w = max(m["ratio"], key=m["ratio"].get)
@@ -183,7 +190,7 @@ class Verification:
                 "score": _num(chosen.score), "cond_bar": _cond_bar(self.default_cond), "warnings": list(self.warnings),
                 "default": {"cond": self.default_cond, "std": dict(self.default_std)},
                 "candidates": [c.to_dict() for c in self.candidates], "elapsed_s": self.elapsed,
-                "plants": [NOMINAL, *self.plants], "plant_seeds": list(self.plant_seeds)}
+                "plants": [NOMINAL, *self.plants], "plant_seeds": list(self.plant_seeds), "engine": self.engine}
 
 
 def _cond_bar(default_cond: float) -> float:
@@ -208,11 +215,11 @@ def plant_variant(plant: PlantSettings, name: str) -> PlantSettings:
     return replace(plant, **values)
 
 
-def _run(trajectory, plan: Plan, seed: int, settings: SimulationSettings) -> Identification:
-    """Simulate ``trajectory`` with the plan's nominal parameters on ``seed`` and identify it (the defaults
-    of ``agvdyn identify``, B_w fixed at its nominal value)."""
+def _run(trajectory, plan: Plan, seed: int, settings: SimulationSettings, engine: str = "ours") -> Identification:
+    """Simulate ``trajectory`` with the plan's nominal parameters on ``seed`` on the plant ``engine`` and
+    identify it (the defaults of ``agvdyn identify``, B_w fixed at its nominal value)."""
     geom = plan.trajectory.geometry
-    result = simulate(trajectory, platform=geom, plant_params=plan.params, settings=settings, seed=seed)
+    result = simulate(trajectory, platform=geom, plant_params=plan.params, settings=settings, seed=seed, engine=engine)
     log = Log.from_frame(result.log_frame(), sidecar=result.sidecar())
     return identify(log, geom, fixed={"B_w": plan.params.B_w}, keep_blocks=False, workers=1)
 
@@ -230,7 +237,7 @@ def _task(key):
     """One simulation and identification (in a forked worker or here): the summary, or the exception's text."""
     i, p, seed = key
     try:
-        return _summary(_run(_SHARED["trajs"][i], _SHARED["plan"], seed, _SHARED["sims"][p]))
+        return _summary(_run(_SHARED["trajs"][i], _SHARED["plan"], seed, _SHARED["sims"][p], _SHARED["engine"]))
     except Exception as exc:  # noqa: BLE001 - reported by the caller
         return f"{type(exc).__name__}: {exc}"
 
@@ -254,7 +261,8 @@ def _measure(runs, default, params) -> dict[str, Any]:
 def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int | None = None,
                 settings: SimulationSettings = SimulationSettings(),
                 prefer_predicted: float = PREFER_PREDICTED, plants: tuple[str, ...] = (),
-                plant_seeds: int | tuple[int, ...] = 2, workers: int = 1) -> tuple[Plan, Verification]:
+                plant_seeds: int | tuple[int, ...] = 2, workers: int = 1,
+                engine: str = "ours") -> tuple[Plan, Verification]:
     """Simulate and identify the plan's best ``candidates`` (default: all it kept,
     ``PlanSettings.candidates``) and the default sequence in the same floor on ``seeds`` (an int n:
     seeds ``VERIFY_SEED0 ... + n - 1``); return the plan with the candidate :func:`choose` takes
@@ -265,11 +273,14 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
     another engine's tyres and wheels; a candidate's score is then that of all its runs pooled (each
     run's std ratios against the default sequence on the same plant and seed; the mean cond and the
     bar over all runs), and each plant's own figures are kept in :attr:`CandidateCheck.plants`.
-    ``workers`` > 1: the runs in that many processes.
+    ``workers`` > 1: the runs in that many processes. ``engine``: the plant of every run, ``"ours"`` or
+    ``"mujoco"`` (no ``plants`` with it: the variants are our plant's).
 
     About 0.2-0.5 s per simulation and identification on the project's machine (117.6 s at 2 ms).
     """
     t0 = time.perf_counter()
+    if engine not in ENGINES:
+        raise ValueError(f"verify_plan: engine={engine!r}: expected one of {ENGINES}")
     seeds = _seeds(seeds)
     if not seeds:
         raise ValueError("verify_plan: expected at least one seed")
@@ -277,6 +288,9 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
     if not pool:
         raise ValueError("verify_plan: the plan keeps no candidates (PlanSettings.candidates >= 1)")
     plants = tuple(p for p in plants if p != NOMINAL)
+    if plants and engine != "ours":
+        raise ValueError(f"verify_plan: plant variants {', '.join(plants)} are our plant's: expected none with "
+                         f"engine={engine!r}")
     variant_seeds = _seeds(plant_seeds) if plants else ()
     if plants and not variant_seeds:
         raise ValueError("verify_plan: expected at least one seed on the plant variants")
@@ -285,7 +299,7 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
     trajs = [plan.reference_trajectory] + [c.trajectory for c in pool]
     tasks = [(i, p, s) for p in sims for s in on[p] for i in range(len(trajs))]
     forked = workers > 1 and "fork" in mp.get_all_start_methods()
-    _SHARED.update(trajs=trajs, plan=plan, sims=sims)
+    _SHARED.update(trajs=trajs, plan=plan, sims=sims, engine=engine)
     try:
         with one_blas_thread(forked):  # one BLAS thread per forked worker
             if forked:
@@ -321,7 +335,7 @@ def verify_plan(plan: Plan, seeds: int | tuple[int, ...] = 4, *, candidates: int
             plants={p: m[p] for p in plants}, search=cand.search))
     chosen = choose(checks, prefer_predicted)
     verification = Verification(seeds, tuple(checks), chosen, default_cond, default_std, time.perf_counter() - t0,
-                                plants, variant_seeds)
+                                plants, variant_seeds, engine)
     return plan.choose(chosen), verification
 
 

@@ -58,6 +58,9 @@ def plan(
                                       "sequence on (two seeds each), comma-separated: soft, stiff (tyres), radii (wheel "
                                       "radii), breakaway (static friction 1.3x); a candidate's score pools all its runs; "
                                       "none: the nominal plant alone."),
+    verify_engine: str = typer.Option("ours", "--verify-engine", help="Plant of the check: ours (the default) or "
+                                      "mujoco (the MuJoCo plant generated from the platform and --params: the check on "
+                                      "a second, independent engine; no --verify-plants with it)."),
     figure: Optional[Path] = typer.Option(None, help="Also save the floor, path and predicted stds as a figure "
                                           "(.png, .svg or .pdf)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -92,6 +95,11 @@ def plan(
             plan_settings.append(replace(one, candidates=min(one.starts, VERIFY_CANDIDATES) if verify > 0 else 1))
         rectangle = parse_floor(floor)
         plants = _plants(verify_plants)
+        if verify_engine not in ("ours", "mujoco"):
+            raise ValueError(f"--verify-engine {verify_engine!r}: expected ours or mujoco")
+        if plants and verify_engine != "ours":
+            raise ValueError(f"--verify-plants {verify_plants}: the plant variants are our plant's; expected none "
+                             f"with --verify-engine {verify_engine}")
     except ValueError as exc:
         raise fail(str(exc)) from exc
     limits = sim.limits
@@ -113,7 +121,8 @@ def plan(
 
         try:
             result, verification = verify_plan(result, verify, settings=sim, plants=plants,
-                                               plant_seeds=VERIFY_PLANT_SEEDS, workers=min(2, os.cpu_count() or 1))
+                                               plant_seeds=VERIFY_PLANT_SEEDS, workers=min(2, os.cpu_count() or 1),
+                                               engine=verify_engine)
         except Exception as exc:  # noqa: BLE001 - the default sequence not identified, a limit broken, ...
             raise fail(f"--verify: the check on the simulator failed ({type(exc).__name__}: {exc}); "
                        "plan with --verify 0 to skip it") from exc
@@ -158,7 +167,8 @@ def plan(
     console.print(phases)
     if verification is not None:
         _print_verification(console, verification)
-    checked = "" if verification is None else f", checked on the simulator in {verification.elapsed:.1f} s"
+    where = "MuJoCo" if verification is not None and verification.engine == "mujoco" else "the simulator"
+    checked = "" if verification is None else f", checked on {where} in {verification.elapsed:.1f} s"
     console.print(f"planned in {result.elapsed:.1f} s from {len(result.starts)} starts{checked}; wrote {written}"
                   + (f" and {figure}" if figure is not None else ""))
     for warning in result.warnings + (verification.warnings if verification is not None else ()):
@@ -181,7 +191,8 @@ def _print_verification(console: Console, verification) -> None:
     """The candidates measured on the simulator next to their prediction (``--verify``)."""
     seeds = verification.seeds
     on = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]} (means)"
-    table = Table(title=f"Candidates simulated and identified on {on}, std ratios "
+    engine = " on MuJoCo" if verification.engine == "mujoco" else ""
+    table = Table(title=f"Candidates simulated{engine} and identified on {on}, std ratios "
                         f"to the default sequence (cond {verification.default_cond:.2f}); score <= 1 meets the bars")
     columns = ["start", "predicted objective", "predicted cond", "cond", "predicted worst ratio", "worst ratio",
                "max error %"]

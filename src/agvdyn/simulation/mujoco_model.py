@@ -251,6 +251,12 @@ class EngineOptions:
     edge, so turning a standing wheel scrubs) or ``"sphere"`` (radius r at the wheel centre: one
     contact point below the centre, the point contact of the rolling constraints, eq. 1-2).
     impratio, solref, solimp : MuJoCo's contact softness (elliptic friction cones).
+    friction_solref : softness of the tyre-floor friction (MuJoCo's ``solreffriction`` of the floor-wheel
+        contact pairs; time constant s, damping ratio): the tangential creep of a sticking tyre, about
+        1.7 um/s per N with the default (0.1, 1), i.e. a slip stiffness of ~3e5 N at 0.5 m/s (our plant's
+        tyres: 3-4e4 N); the normal direction keeps ``solref``. None: the contact's ``solref`` (MuJoCo's
+        default; 0.08 um/s per N: a tyre without lateral give scrubs at the friction limit on any toe
+        misalignment, and the identification reads the scrub as wheel friction, docs/simulation.md).
     coupling_solref : softness of the steering coupling's joint equality (time constant, damping ratio).
     wheel_radii : the wheels' true radii (4,), m; None = r (the controller and odometry use r).
     """
@@ -261,6 +267,7 @@ class EngineOptions:
     impratio: float = 10.0
     solref: tuple[float, float] = (0.004, 1.0)
     solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
+    friction_solref: tuple[float, float] | None = (0.1, 1.0)
     coupling_solref: tuple[float, float] = (0.004, 1.0)
     wheel_radii: tuple[float, float, float, float] | None = None
 
@@ -271,6 +278,10 @@ class EngineOptions:
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"engine option {key}={v!r}: expected a finite number > 0")
+        if self.friction_solref is not None and not (len(self.friction_solref) == 2
+                                                     and all(math.isfinite(v) and v > 0 for v in self.friction_solref)):
+            raise ValueError(f"friction_solref={self.friction_solref!r}: expected (time constant s, damping ratio) > 0 "
+                             "or None")
         if self.wheel_radii is not None and (len(self.wheel_radii) != 4 or min(self.wheel_radii) <= 0):
             raise ValueError(f"wheel_radii={self.wheel_radii!r}: expected 4 radii > 0 m")
 
@@ -279,10 +290,12 @@ class EngineOptions:
 
 
 def body_names() -> dict[str, list[str]]:
-    """Names of the generated model's elements: bodies, joints, actuators (wheel order fl, rl, fr, rr)."""
+    """Names of the generated model's elements: bodies, joints, actuators, the floor-wheel contact pairs
+    (wheel order fl, rl, fr, rr)."""
     return {"bodies": ["chassis", *(f"unit_{w}" for w in WHEELS), *(f"wheel_{w}" for w in WHEELS)],
             "joints": ["root", *(f"steer_{w}" for w in WHEELS), *(f"wheel_{w}" for w in WHEELS)],
-            "actuators": [f"motor_{w}" for w in WHEELS]}
+            "actuators": [f"motor_{w}" for w in WHEELS],
+            "pairs": [f"tyre_{w}_floor" for w in WHEELS]}
 
 
 def _v(x) -> str:
@@ -293,7 +306,9 @@ def mjcf(geom: Geometry, bodies: VehicleBodies, options: EngineOptions = EngineO
          name: str | None = None) -> str:
     """MJCF text of the vehicle: chassis on a free joint over a floor plane, four steering units on
     hinges at (+-l/2, +-b/2) (range +-pi/2, the stops), wheels on hinges about the axle at ``a``
-    outboard, in frictional contact with the floor; the rear unit of each side coupled to the front
+    outboard, in frictional contact with the floor (one explicit contact pair per wheel,
+    ``tyre_*_floor``, which carries the friction, its softness ``friction_solref`` and the contact's
+    ``solref``/``solimp``); the rear unit of each side coupled to the front
     (``theta_rear = -alpha``, a joint equality); joint damping and frictionloss; one motor per wheel
     with gear ``i_G`` (control = motor torque, N m). Geometry ``(l, b, a, r, i_G)`` is also stored as
     the custom numeric ``agvdyn_platform``."""
@@ -347,12 +362,20 @@ def mjcf(geom: Geometry, bodies: VehicleBodies, options: EngineOptions = EngineO
             lines.append(f'          <geom name="tyre_{w}" type="cylinder" size="{r_i:.17g} {width / 2:.17g}" '
                          'zaxis="0 1 0" contype="0" conaffinity="0" mass="0"/>')
         lines += [
+            # contacts with the floor come from the pairs below (contype/conaffinity 0: no other contacts)
             f'          <geom name="contact_{w}" {shape} friction="{o.friction:.17g} 0 0" condim="3" priority="2" '
-            f'solref="{solref}" solimp="{solimp}" mass="0"{hidden}/>',
+            f'solref="{solref}" solimp="{solimp}" contype="0" conaffinity="0" mass="0"{hidden}/>',
             '        </body>',
             '      </body>',
         ]
-    lines += ['    </body>', '  </worldbody>', '  <equality>']
+    lines += ['    </body>', '  </worldbody>', '  <contact>']
+    # pair friction: two sliding (condim 3 uses these), torsional, two rolling (unused with condim 3)
+    soft = "0 0" if o.friction_solref is None else _v(o.friction_solref)  # "0 0": the pair's solref
+    for w in WHEELS:
+        lines.append(f'    <pair name="tyre_{w}_floor" geom1="floor" geom2="contact_{w}" condim="3" '
+                     f'friction="{o.friction:.17g} {o.friction:.17g} 0.005 0.0001 0.0001" solref="{solref}" '
+                     f'solimp="{solimp}" solreffriction="{soft}"/>')
+    lines += ['  </contact>', '  <equality>']
     for front, rear in (("fl", "rl"), ("fr", "rr")):
         lines.append(f'    <joint name="coupling_{front[1]}" joint1="steer_{rear}" joint2="steer_{front}" '
                      f'polycoef="0 -1 0 0 0" solref="{_v(o.coupling_solref)}"/>')

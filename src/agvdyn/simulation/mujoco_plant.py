@@ -10,10 +10,11 @@ and writes the motor torques into MuJoCo's controls; then MuJoCo steps ``T_s / t
 MuJoCo is driven from Python once per sample (its step cannot be called from compiled code): about
 23 us per sample in all (~85x real time in-process, ~40x end to end, benchmarks/bench_mujoco.py).
 
-Slip scenario on MuJoCo: a friction patch lowers the friction of a wheel's contact geom (which has
-the higher contact priority, so MuJoCo uses its friction) while that wheel's contact point is on
-the patch, checked once per sample; bursts are added by the shared drive. No slip law: MuJoCo's
-contact solver decides how the wheels slip.
+Slip scenario on MuJoCo: a friction patch lowers the friction of a wheel's floor contact pair
+(``tyre_*_floor``; in an MJCF without the pairs, of its contact geom, which has the higher contact
+priority, so MuJoCo uses its friction) while that wheel's contact point is on the patch, checked
+once per sample; bursts are added by the shared drive. No slip law: MuJoCo's contact solver decides
+how the wheels slip.
 """
 from __future__ import annotations
 
@@ -201,14 +202,16 @@ class MujocoVehicle:
 
 
 @_jit
-def _begin_sample(k, qpos, qvel, qi, vi, ai, contact, base_mu, geom_friction, c, g, Ts, wheel_res, steer_res,
+def _begin_sample(k, qpos, qvel, qi, vi, ai, contact, base_mu, friction, c, g, Ts, wheel_res, steer_res,
                   u_ff, mode_d, alpha_d, alpha_dot_d, beta_d, beta_dot_d, steer_noise, torque_noise, torque_offset,
                   t, burst, patches, i_G, pos, vel, cstate, work, ctrl,
                   out_pos, out_vel, out_alpha, out_beta, out_cmd, out_app, out_meas, out_work):
     """Sample k up to the plant: MuJoCo's state -> plant positions ``pos`` (X, Y, gamma unwrapped,
     alpha_l, alpha_r, beta_*) and body-frame velocities ``vel``; sensors, controller and drive
-    (:func:`drive_sample`); motor torques into ``ctrl``; friction of the contact geoms from the
-    patches; cumulative motor work (left Riemann sum over the sample)."""
+    (:func:`drive_sample`); motor torques into ``ctrl``; the tyres' friction from the patches (rows
+    ``contact`` of ``friction``, MuJoCo's pair_friction or geom_friction; ``base_mu`` (8,) the
+    unpatched first column, then the second, -1 for a geom, whose second column is torsional);
+    cumulative motor work (left Riemann sum over the sample)."""
     qw, qx, qy, qz = qpos[3], qpos[4], qpos[5], qpos[6]
     yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     d = yaw - pos[2]
@@ -242,7 +245,9 @@ def _begin_sample(k, qpos, qvel, qi, vi, ai, contact, base_mu, geom_friction, c,
         mu_w = np.ones(4)
         patch_factors(c, pos, t[k], patches, mu_w)
         for i in range(4):
-            geom_friction[contact[i], 0] = base_mu[i] * mu_w[i]
+            friction[contact[i], 0] = base_mu[i] * mu_w[i]
+            if base_mu[4 + i] >= 0:  # a pair: its second sliding direction too
+                friction[contact[i], 1] = base_mu[4 + i] * mu_w[i]
 
 
 def initial_state(model, data, alpha0: np.ndarray, settle: float = 0.3) -> None:
@@ -274,6 +279,20 @@ def initial_state(model, data, alpha0: np.ndarray, settle: float = 0.3) -> None:
     mujoco.mj_forward(model, data)
 
 
+def _tyre_friction(model, source: str) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Where MuJoCo takes each wheel's tyre-floor friction from: the rows (4,) and the array, the
+    contact pairs ``tyre_*_floor`` (``model.pair_friction``) when the model has them, else the contact
+    geoms ``contact_*`` (``model.geom_friction``: an MJCF written before the pairs); whether they are pairs."""
+    mujoco = _mujoco()
+    pairs = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_PAIR, f"tyre_{w}_floor") for w in WHEELS]
+    if all(i >= 0 for i in pairs):
+        return np.array(pairs, dtype=np.int64), model.pair_friction, True
+    if any(i >= 0 for i in pairs):
+        raise ValueError(f"{source}: contact pairs {[f'tyre_{w}_floor' for w in WHEELS]}: expected all four or none")
+    geoms = np.array([_id(model, "geom", f"contact_{w}", source) for w in WHEELS], dtype=np.int64)
+    return geoms, model.geom_friction, False
+
+
 def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray, patches: np.ndarray,
                    energy: np.ndarray) -> Callable[[int, int], None]:
     """``step(k0, k1)`` for :func:`agvdyn.simulation._setup.run_chunks`: samples k0..k1-1 on MuJoCo.
@@ -303,8 +322,8 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
     qi = np.array([jq[j] for j in order], dtype=np.int64)
     vi = np.array([jv[j] for j in order], dtype=np.int64)
     ai = np.array([_id(model, "actuator", f"motor_{w}", src) for w in WHEELS], dtype=np.int64)
-    contact = np.array([_id(model, "geom", f"contact_{w}", src) for w in WHEELS], dtype=np.int64)
-    base_mu = model.geom_friction[contact, 0].copy()
+    contact, friction, pairs = _tyre_friction(model, src)
+    base_mu = np.concatenate([friction[contact, 0], friction[contact, 1] if pairs else np.full(4, -1.0)])
     initial_state(model, data, np.asarray(traj.alpha[0], dtype=float))
     st.pos[2] = 0.0
     out = st.out
@@ -314,7 +333,7 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
 
     def step(k0: int, k1: int) -> None:
         for k in range(k0, k1):
-            _begin_sample(k, data.qpos, data.qvel, qi, vi, ai, contact, base_mu, model.geom_friction, st.c, st.g, Ts,
+            _begin_sample(k, data.qpos, data.qvel, qi, vi, ai, contact, base_mu, friction, st.c, st.g, Ts,
                           st.wheel_res, st.steer_res, st.u_ff, mode_d, alpha_d, alpha_dot_d, st.beta_d, beta_dot_d,
                           st.noise.steering, st.noise.torque, st.noise.torque_offset, t, burst, patches, i_G,
                           st.pos, st.vel, st.cstate, st.work, data.ctrl,
