@@ -97,9 +97,9 @@ def acceptance(seeds: list[int]) -> None:
             ident_log = Log.from_frame(ident_sim.log_frame(), sidecar=ident_sim.sidecar())
             lane_log = Log.from_frame(lane_sim.log_frame(), sidecar=lane_sim.sidecar())
             for filtering in ("parallel", "literal"):
-                ident = identify(ident_log, settings=IdentificationSettings(filtering=filtering))
+                ident = identify(ident_log, settings=IdentificationSettings.from_flat(filtering=filtering))
                 table = parameter_table(ident, PAPER_PARAMETERS, {}).drop(index="B_w")
-                val = validate(lane_log, ident.parameters, settings=IdentificationSettings(filtering=filtering))
+                val = validate(lane_log, ident.parameters, settings=IdentificationSettings.from_flat(filtering=filtering))
                 cells = " ".join(f"{n} {row.deviation_pct:+.1f}%/{row.deviation_in_std:.1f}s{'' if row.ok else '!'}"
                                  for n, row in table.iterrows())
                 nrmse = " ".join(f"{k.split(':')[1]} {v:.3f}/{val.nrmse_moving[k]:.3f}" for k, v in val.nrmse.items())

@@ -57,7 +57,7 @@ def fleet(tmp_path_factory) -> Path:
 def _alone(job: BatchJob):
     """identify() run alone on a job's inputs, the way a user would call it."""
     return identify(list(job.logs), job.platform, fixed=job.fixed(),
-                    settings=IdentificationSettings(**{k: v for k, v in (("estimator", job.estimator),
+                    settings=IdentificationSettings.from_flat(**{k: v for k, v in (("estimator", job.estimator),
                                                                          ("uncertainty", job.uncertainty)) if v}))
 
 

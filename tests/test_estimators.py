@@ -162,32 +162,32 @@ def test_robust_on_a_slip_log_without_slip_detection(slip_log):
     """The full --slip scenario (torque bursts, with and without slip), slip detection off: the
     robust estimator stays within 2 % of the slip-free twin where ols does not."""
     slipped, clean = slip_log
-    twin = identify(clean, settings=IdentificationSettings(estimator="ols"))
+    twin = identify(clean, settings=IdentificationSettings.from_flat(estimator="ols"))
     blind = dict(slip_threshold=math.inf, max_relative_std=math.inf)
     names = ("m_ch", "C_ch", "d_vw", "d_cw")
 
     def worst(ident):
         return max(abs(getattr(ident.parameters, n) / getattr(twin.parameters, n) - 1) for n in names)
 
-    robust = identify(slipped, settings=IdentificationSettings(estimator="robust", **blind))
-    ols = identify(slipped, settings=IdentificationSettings(estimator="ols", **blind))
+    robust = identify(slipped, settings=IdentificationSettings.from_flat(estimator="robust", **blind))
+    ols = identify(slipped, settings=IdentificationSettings.from_flat(estimator="ols", **blind))
     assert worst(robust) < 0.02 < worst(ols)
     assert robust.downweighted_rows > 100
 
 
 def test_uncertainty_outputs_and_classic_is_eq25(slip_log):
     _, clean = slip_log
-    classic = identify(clean, settings=IdentificationSettings(estimator="ols", uncertainty="classic"))
-    hac = identify(clean, settings=IdentificationSettings(estimator="ols", uncertainty="hac"))
+    classic = identify(clean, settings=IdentificationSettings.from_flat(estimator="ols", uncertainty="classic"))
+    hac = identify(clean, settings=IdentificationSettings.from_flat(estimator="ols", uncertainty="hac"))
     assert classic.std == pytest.approx(classic.std_classic)
     assert hac.parameters.to_vector() == pytest.approx(classic.parameters.to_vector())
     # the chassis std grows (correlated residuals), the steering std shrinks (no more pooled sigma)
     assert hac.std["m_ch"] > 3 * classic.std["m_ch"] and hac.std["d_cl"] < classic.std["d_cl"]
     low, high = hac.ci95("m_ch")
     assert low < hac.parameters.m_ch < high and high - low == pytest.approx(2 * 1.959964 * hac.std["m_ch"])
-    corr = np.array(hac.correlation["matrix"])
+    corr = np.array(hac.correlation.matrix)
     assert np.allclose(corr, corr.T) and np.allclose(np.diag(corr), 1) and np.all(np.abs(corr) <= 1 + 1e-9)
-    assert hac.uncertainty["method"] == "hac" and hac.uncertainty["bandwidth_steps"] >= 50
+    assert hac.uncertainty.method == "hac" and hac.uncertainty.bandwidth_steps >= 50
 
 
 def test_interval_quantiles_equal_scipy_stats():

@@ -67,7 +67,7 @@ def test_regression_stage_identifies_B_w_with_a_car_like_run(model_data):
     with pytest.raises(UnidentifiableError, match="variance inflation") as info:
         fit_blocks(blocks, PROTOTYPE, fixed={})
     assert "B_w" in [d.name for d in info.value.dependencies]
-    unchecked = IdentificationSettings(max_inflation=math.inf, max_relative_std=math.inf)
+    unchecked = IdentificationSettings.from_flat(max_inflation=math.inf, max_relative_std=math.inf)
     ident = fit_blocks(blocks, PROTOTYPE, fixed={}, settings=unchecked)
     assert np.abs(ident.parameters.to_vector() / TRUE - 1).max() < 1e-6
     assert ident.fixed == ()
@@ -93,8 +93,8 @@ def test_whole_pipeline_on_noise_free_model_log(model_log):
 
 def test_literal_filtering_is_biased_parallel_is_not(model_log):
     """The paper's literal variant smears the Coulomb steps of the torques only: measurable bias."""
-    parallel = identify(model_log, settings=IdentificationSettings(filtering=Filtering.PARALLEL))
-    literal = identify(model_log, settings=IdentificationSettings(filtering="literal"))
+    parallel = identify(model_log, settings=IdentificationSettings.from_flat(filtering=Filtering.PARALLEL))
+    literal = identify(model_log, settings=IdentificationSettings.from_flat(filtering="literal"))
     assert _rel_error(literal).max() > 20 * _rel_error(parallel).max()
     assert _rel_error(literal).max() > 1e-4
 
@@ -117,7 +117,7 @@ def test_only_straight_motion_is_refused_naming_parameters():
     assert names[:7] == ["C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "C_ch"]
     assert len(names) == 10 and all(n.startswith("offset_") for n in names[7:])
     with pytest.raises(UnidentifiableError) as info:
-        identify(Log.from_frame(frame), PROTOTYPE, settings=IdentificationSettings(torque_offsets=False))
+        identify(Log.from_frame(frame), PROTOTYPE, settings=IdentificationSettings.from_flat(torque_offsets=False))
     assert [d.name for d in info.value.dependencies] == ["C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "C_ch"]
     message = str(info.value)
     assert "steer_left" in message and "rotation (mode 4)" in message
@@ -188,13 +188,13 @@ def test_bad_input_errors(model_log):
     with pytest.raises(ValueError, match="fixed parameter 'B_x'"):
         identify(model_log, fixed={"B_x": 1.0})
     with pytest.raises(ValueError, match=r"segments \['lateral'\] are not in the logs.*'rotation', 'steer_left'"):
-        identify(model_log, settings=IdentificationSettings(segments=("lateral",)))
+        identify(model_log, settings=IdentificationSettings.from_flat(segments=("lateral",)))
     with pytest.raises(ValueError, match=r"unknown segment names \['straigth'\]: expected some of \[.*'straight'"):
-        IdentificationSettings(segments=("straigth",))
+        IdentificationSettings.from_flat(segments=("straigth",))
     with pytest.raises(ValueError, match="stiction_threshold"):
-        IdentificationSettings(stiction_threshold=-1.0)
+        IdentificationSettings.from_flat(stiction_threshold=-1.0)
     with pytest.raises(ValueError):
-        IdentificationSettings(filtering="smooth")
+        IdentificationSettings.from_flat(filtering="smooth")
 
 
 def test_rows_off_their_label_are_counted_not_refused(model_data):
@@ -225,7 +225,7 @@ def test_motor_torque_offsets_are_estimated(model_data):
     assert ident.offset_vector == pytest.approx(offsets, abs=1e-6)
     assert set(ident.offsets_std) == {"offset_fl", "offset_rl", "offset_fr", "offset_rr"}
     assert 1.0 < ident.condition_number < ident.condition_number_with_offsets
-    plain = identify(log, PROTOTYPE, settings=IdentificationSettings(torque_offsets=False, uncertainty="classic"))
+    plain = identify(log, PROTOTYPE, settings=IdentificationSettings.from_flat(torque_offsets=False, uncertainty="classic"))
     assert _rel_error(plain).max() > 1e-2
     assert plain.offsets == {} and plain.offset_vector is None
 
@@ -243,7 +243,7 @@ def test_refusal_agrees_with_table1_rank(segments, modes):
     rank = base_parameters(PROTOTYPE, parse_modes(modes)).rank
     frame, _ = identification_frame(segments)
     with pytest.raises(UnidentifiableError) as info:
-        identify(Log.from_frame(frame), PROTOTYPE, fixed={}, settings=IdentificationSettings(torque_offsets=False))
+        identify(Log.from_frame(frame), PROTOTYPE, fixed={}, settings=IdentificationSettings.from_flat(torque_offsets=False))
     assert len(info.value.dependencies) == len(PARAMETER_NAMES) - rank
 
 
@@ -322,7 +322,7 @@ def test_steering_guard_removes_the_bias_of_a_sticking_steering_joint():
     log = Log.from_frame(r.log_frame(), sidecar=r.sidecar())
     error = {}
     for guard in (2.0, 4.0):
-        ident = identify(log, PROTOTYPE, settings=IdentificationSettings(steering_guard=guard), keep_blocks=False)
+        ident = identify(log, PROTOTYPE, settings=IdentificationSettings.from_flat(steering_guard=guard), keep_blocks=False)
         error[guard] = ident.parameters.C_l / PAPER_PARAMETERS.C_l - 1
         assert ident.settings.to_dict()["steering_guard"] == guard
     assert error[2.0] < -0.1 and abs(error[2.0]) > 3 * abs(error[4.0])

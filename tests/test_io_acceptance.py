@@ -145,6 +145,6 @@ def test_acceptance_simulated_identification_log_through_a_ros2_bag(tmp_path):
 
     p0 = identify(log).parameters.to_vector()  # platform and torque_lead (0.5) from the sidecar
     # the bag carries no sidecar: the drive's zero-order hold is declared as for a recorded bag
-    p1 = identify(back, PROTOTYPE, settings=IdentificationSettings(torque_lead=0.5)).parameters.to_vector()
+    p1 = identify(back, PROTOTYPE, settings=IdentificationSettings.from_flat(torque_lead=0.5)).parameters.to_vector()
     rel = np.abs(p1 / p0 - 1)
     assert rel.max() < 1e-3, dict(zip(PARAMETER_NAMES, rel))

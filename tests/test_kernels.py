@@ -3,7 +3,6 @@ formulation they replace: derivatives, odometry and slip, entries of Theta, mode
 stiction mask and guard, and the gathered kept rows."""
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numba
@@ -48,7 +47,7 @@ def test_stretch_signals_equal_the_numpy_formulation(log):
     n = len(log.t)
     st = filtered_stretch(PROTOTYPE, log, 0, n, SETTINGS)
     dt = st.dt
-    f = lowpass(np.concatenate([log.alpha, log.beta], axis=1), dt, SETTINGS.filter)
+    f = lowpass(np.concatenate([log.alpha, log.beta], axis=1), dt, SETTINGS.rows.filter)
     d = time_derivative(f, dt)
     dd = time_derivative(d, dt)
     alpha = np.clip(f[:, :2], -math.pi / 2, math.pi / 2)
@@ -64,8 +63,8 @@ def test_stretch_signals_equal_the_numpy_formulation(log):
     _close(st.chassis_ddot, time_derivative(chassis, dt))
     q_dot = np.concatenate([chassis, d], axis=1)
     q_ddot = np.concatenate([time_derivative(chassis, dt), dd], axis=1)
-    both = lowpass(np.concatenate([regressor_signals(q_dot, q_ddot, SETTINGS.epsilon),
-                                   align_torque(log.torque, 0.5)], axis=1), dt, SETTINGS.filter)
+    both = lowpass(np.concatenate([regressor_signals(q_dot, q_ddot, SETTINGS.rows.epsilon),
+                                   align_torque(log.torque, 0.5)], axis=1), dt, SETTINGS.rows.filter)
     _close(st.signals, both[:, :21], 1e-10)
     _close(st.torque, both[:, 21:])
 
@@ -73,15 +72,15 @@ def test_stretch_signals_equal_the_numpy_formulation(log):
 def test_modes_equal_the_rules_on_numpy(log):
     st = filtered_stretch(PROTOTYPE, log, 0, len(log.t), SETTINGS)
     mode, _ = _modes_and_virtual_angle(PROTOTYPE, st, SETTINGS)
-    config = detect_mode(PROTOTYPE, st.alpha, SETTINGS.mode_tolerance).astype(np.int8)
+    config = detect_mode(PROTOTYPE, st.alpha, SETTINGS.rows.mode_tolerance).astype(np.int8)
     H1 = kinematic_model(PROTOTYPE, Mode.PARKING, st.alpha[:1])[0]
-    rest = row_max_abs(st.beta_dot - st.alpha_dot @ H1[5:].T) * PROTOTYPE.r < SETTINGS.rest_speed
-    steering = row_max_abs(st.alpha_dot) > SETTINGS.steering_rest_rate
+    rest = row_max_abs(st.beta_dot - st.alpha_dot @ H1[5:].T) * PROTOTYPE.r < SETTINGS.rows.rest_speed
+    steering = row_max_abs(st.alpha_dot) > SETTINGS.rows.steering_rest_rate
     expected = config.copy()
     expected[rest & steering] = int(Mode.PARKING)
     expected[~rest & (config == int(Mode.PARKING))] = NO_MODE
     straight = ~rest & steering & (config == int(Mode.STRAIGHT))
-    on_icr = np.abs(icr_residual(PROTOTYPE, st.alpha)) <= SETTINGS.mode_tolerance
+    on_icr = np.abs(icr_residual(PROTOTYPE, st.alpha)) <= SETTINGS.rows.mode_tolerance
     expected[straight] = np.where(on_icr[straight], int(Mode.CAR_LIKE), NO_MODE)
     expected[~rest & steering & np.isin(config, [int(Mode.LATERAL), int(Mode.ROTATION)])] = NO_MODE
     np.testing.assert_array_equal(mode, expected)
@@ -90,21 +89,21 @@ def test_modes_equal_the_rules_on_numpy(log):
 
 @pytest.mark.parametrize("steering_guard", [2.0, 4.0])  # the chassis' guard, and the steering's default
 def test_projection_mask_and_guard_equal_projected_block(log, steering_guard):
-    settings = dataclasses.replace(SETTINGS, steering_guard=steering_guard)
+    settings = SETTINGS.replace(steering_guard=steering_guard)
     st = filtered_stretch(PROTOTYPE, log, 0, len(log.t), settings)
     mode, av = _modes_and_virtual_angle(PROTOTYPE, st, SETTINGS)
     usable = ~st.edge & (mode != NO_MODE)
     usable[len(usable) // 3: len(usable) // 3 + 40] = False  # a hole: the guard acts inside a run
     mine = np.ones(st.n, dtype=bool)
-    guards = {c: int(round(settings.seconds(g) / st.dt)) for c, g in settings.guards().items()}
+    guards = {c: settings.rows.guard_samples(g, st.dt) for c, g in settings.rows.guards().items()}
     assert guards["x_ch"] == 25 and guards["alpha_l"] == round(12.5 * steering_guard)  # 2 ms samples, 40 rad/s
     blocks = _stretch_blocks(PROTOTYPE, st, mode, av, usable, None, settings, "r", mine)
     assert blocks
     for b in blocks:
         a, e = int(b.sample[0]), int(b.sample[-1]) + 1
         ref = projected_block(PROTOTYPE, b.mode, st.alpha[a:e], st.q_dot[a:e], st.signals[a:e], st.torque[a:e],
-                              t=st.t[a:e], source="", segment="", stiction_threshold=SETTINGS.thresholds(),
-                              mode_tolerance=SETTINGS.mode_tolerance, recording="r", sample=np.arange(a, e))
+                              t=st.t[a:e], source="", segment="", stiction_threshold=SETTINGS.rows.thresholds(),
+                              mode_tolerance=SETTINGS.rows.mode_tolerance, recording="r", sample=np.arange(a, e))
         _close(b.regressor, ref.regressor, 1e-11)
         _close(b.torque, ref.torque, 1e-9)
         _close(b.s_dot, ref.s_dot, 1e-9)  # sums of wheel rates that cancel: round-off of the q_dot scale

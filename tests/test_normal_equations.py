@@ -3,7 +3,6 @@ long logs read in pieces, unexcited parameters with unbounded intervals, torque 
 from __future__ import annotations
 
 import json
-import dataclasses
 import math
 
 import numpy as np
@@ -43,7 +42,7 @@ def _vector(ident) -> np.ndarray:
 @pytest.mark.parametrize("estimator", ["ols", "wls", "bounded"])
 @pytest.mark.parametrize("uncertainty", ["classic", "hac", "jackknife", "bootstrap"])
 def test_gram_blocks_give_the_stacked_answer(noisy_log, estimator, uncertainty):
-    settings = IdentificationSettings(estimator=estimator, uncertainty=uncertainty, bootstrap_replicates=40)
+    settings = IdentificationSettings.from_flat(estimator=estimator, uncertainty=uncertainty, bootstrap_replicates=40)
     blocks = log_rows(noisy_log, PROTOTYPE, settings).blocks
     fast = fit_blocks(blocks, PROTOTYPE, settings=settings)
     ref = fit_blocks(blocks, PROTOTYPE, settings=settings, stacked=True)
@@ -145,7 +144,7 @@ def long_log(tmp_path_factory):
 
 
 def test_a_long_log_in_pieces_gives_the_whole_logs_answer(long_log, monkeypatch):
-    settings = IdentificationSettings(slip_threshold=math.inf)
+    settings = IdentificationSettings.from_flat(slip_threshold=math.inf)
     whole = identify(read_log(long_log), settings=settings, keep_blocks=False)
     monkeypatch.setattr(chunks, "CHUNK_ROWS", 7000)
     assert chunks.is_long_log(long_log)
@@ -157,18 +156,18 @@ def test_a_long_log_in_pieces_gives_the_whole_logs_answer(long_log, monkeypatch)
     np.testing.assert_allclose(_vector(chunked), _vector(whole), rtol=1e-9)
     # the jackknife's blocks are cut at multiples of the block length of the log's sample index: with
     # the same bandwidth, pieces and whole log have the same blocks and the same std
-    fixed_band = dataclasses.replace(settings, bandwidth=600)
+    fixed_band = settings.replace(bandwidth=600)
     whole, chunked = identify(read_log(long_log), settings=fixed_band), identify(long_log, settings=fixed_band)
-    assert chunked.uncertainty["blocks"] == whole.uncertainty["blocks"]
+    assert chunked.uncertainty.blocks == whole.uncertainty.blocks
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=1e-6)
     # HAC windows are cut where the pieces meet: the std may move a little, never much
-    hac = dataclasses.replace(settings, uncertainty="hac")
+    hac = settings.replace(uncertainty="hac")
     whole, chunked = identify(read_log(long_log), settings=hac), identify(long_log, settings=hac)
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=0.05)
 
 
 def test_a_long_csv_log_streams_in_pieces_too(long_log, tmp_path, monkeypatch):
-    settings = IdentificationSettings(slip_threshold=math.inf)
+    settings = IdentificationSettings.from_flat(slip_threshold=math.inf)
     log = read_log(long_log)
     csv = write_log(tmp_path / "long.csv", log.frame, log.sidecar)
     whole = identify(read_log(csv), settings=settings, keep_blocks=False)
@@ -185,7 +184,7 @@ def test_bounded_on_one_segment_reports_what_it_cannot_identify(tmp_path):
     log = Log.from_frame(frame)
     with pytest.raises(UnidentifiableError):
         identify(log)  # wls: refused, naming them
-    ident = identify(log, settings=IdentificationSettings(estimator="bounded"))
+    ident = identify(log, settings=IdentificationSettings.from_flat(estimator="bounded"))
     values = ident.parameters.to_dict()
     assert all(values[n] >= 0 for n in PARAMETER_NAMES)
     unexcited = {n for n, s in ident.std.items() if not math.isfinite(s)}
@@ -197,7 +196,7 @@ def test_bounded_on_one_segment_reports_what_it_cannot_identify(tmp_path):
     assert abs(values["C_l"] / 0.3342 - 1) < 1e-3
     written = ident.write(tmp_path / "p.yaml")
     assert written.exists()
-    report = identify(log, settings=IdentificationSettings(unexcited="report"))
+    report = identify(log, settings=IdentificationSettings.from_flat(unexcited="report"))
     assert math.isinf(report.std["m_ch"]) and report.parameters.m_ch == 0.0
 
 
@@ -207,7 +206,7 @@ def test_torque_alignment_of_a_zero_order_hold_drive():
     np.testing.assert_allclose(out[1:, 0], np.arange(1, 6) - 0.5)
     assert out[0, 0] == 0.0 and align_torque(m, 0.0) is m
     with pytest.raises(ValueError, match="torque_lead"):
-        IdentificationSettings(torque_lead=2.0)
+        IdentificationSettings.from_flat(torque_lead=2.0)
 
 
 def test_the_kept_thread_pool_runs_nested_maps_inline_and_is_new_after_a_fork():

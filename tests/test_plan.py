@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from agvdyn.cli import app
 from agvdyn.identification import IdentificationSettings, identify
 from agvdyn.io import Log
+from agvdyn.row_rules import RowSettings
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
 from agvdyn.simulation import simulate
 from agvdyn.trajectories import (
@@ -95,11 +96,12 @@ def test_parameter_margins():
 
 def test_planner_thresholds_are_the_identification_defaults():
     ident, plan_ = IdentificationSettings(), pl.PlanSettings()
-    assert plan_.steering_threshold == ident.steering_threshold
-    assert plan_.stiction_threshold == ident.stiction_threshold
-    assert plan_.stiction_guard == pytest.approx(ident.seconds(ident.stiction_guard))
-    assert plan_.steering_guard == pytest.approx(ident.seconds(ident.steering_guard))
-    assert plan_.guard("alpha_l", weights=True) == plan_.steering_weights_guard < plan_.steering_guard  # see PlanSettings
+    assert plan_.rows == ident.rows  # one RowSettings: thresholds and guards in one unit
+    assert plan_.threshold("alpha_l") == ident.rows.steering_threshold == 0.1
+    assert plan_.threshold("x_ch") == ident.rows.stiction_threshold == 0.05
+    assert plan_.guard("x_ch") == ident.rows.seconds(ident.rows.stiction_guard) == 0.05  # s, as before stop 27
+    assert plan_.guard("alpha_l") == ident.rows.seconds(ident.rows.steering_guard) == 0.1
+    assert plan_.guard("alpha_l", weights=True) == 0.05 < plan_.guard("alpha_l")  # see PlanSettings
 
 
 def test_predictions_use_noise_the_optimiser_weights_noise():
@@ -128,7 +130,7 @@ def test_prediction_of_the_default_sequence():
     seeds 0-3, guard 4: C_l 0.0022, m_ch 0.75, C_ch 0.47; docs/planning.md, "Stop 24")."""
     ev = pl.evaluate_sequence(identification_sequence(), P)
     assert 19 < ev.cond < 24
-    two = pl.evaluate_sequence(identification_sequence(), P, settings=pl.PlanSettings(steering_guard=0.05))
+    two = pl.evaluate_sequence(identification_sequence(), P, settings=pl.PlanSettings(rows=RowSettings(steering_guard=2.0)))
     assert 15 < two.cond < 20
     assert ev.std["C_l"] == pytest.approx(0.0022, rel=0.2)
     assert ev.std["m_ch"] == pytest.approx(0.75, rel=0.2)

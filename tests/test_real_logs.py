@@ -118,7 +118,7 @@ def test_right_hand_torques_with_the_wrong_sign_are_named(run):
 
 def test_only_selected_segments_are_used(run):
     frame, side = run
-    counts = log_rows(_log(frame, side), PROTOTYPE, IdentificationSettings(segments=("straight",))).counts
+    counts = log_rows(_log(frame, side), PROTOTYPE, IdentificationSettings.from_flat(segments=("straight",))).counts
     assert set(counts.per_mode) == {"2s"}
     assert counts.not_selected > 0.6 * counts.samples
 
@@ -150,7 +150,7 @@ def test_slip_is_found_and_dropped(slip_run, reference):
         got, want = getattr(ident.parameters, n), getattr(reference.parameters, n)
         assert abs(got / want - 1) < 0.01, f"{n}: {got:.6g} against the slip-free twin's {want:.6g}"
     # without slip detection the same log is off by more
-    blind = identify(log, settings=IdentificationSettings(slip_threshold=float("inf"), max_relative_std=float("inf")))
+    blind = identify(log, settings=IdentificationSettings.from_flat(slip_threshold=float("inf"), max_relative_std=float("inf")))
     assert max(abs(getattr(blind.parameters, n) / getattr(reference.parameters, n) - 1) for n in ("m_ch", "d_vw")) > 0.01
 
 

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from typer.testing import CliRunner
 
 import agvdyn
-from agvdyn import plots
+from agvdyn import figure_data, plots
 from agvdyn.cli import app
 from agvdyn.identification import IdentificationSettings, identify, load_logs
 from agvdyn.io import write_log
@@ -37,7 +37,7 @@ SHORT = {"steer_left": 6.0, "steer_right": 6.0, "straight": 6.0, "rotation": 6.0
 #: correlation time grows with the log, so the default jackknife's blocks are few and its warnings
 #: (a std resting on one block or few blocks, tested in test_estimators) depend on where the blocks
 #: fall. These tests are about the report: they take the HAC covariance, which has no such warning.
-HAC = IdentificationSettings(uncertainty="hac")
+HAC = IdentificationSettings.from_flat(uncertainty="hac")
 #: Another vehicle than the paper's prototype: other geometry, other parameters.
 CART = Geometry(l=0.9, b=0.6, a=0.03, r=0.08, i_G=18.0, name="cart")
 CART_PARAMETERS = PAPER_PARAMETERS.replace(m_ch=420.0, C_ch=120.0, d_vw=0.4, d_cw=2.0)
@@ -135,7 +135,7 @@ def test_validation_figure_draws_the_model_only_on_kept_rows(results):
 
 def test_residual_autocorrelation_is_one_at_lag_zero_and_bounded(results):
     ident, _ = results
-    acf = plots.residual_autocorrelation(ident, 200)
+    acf = figure_data.residual_autocorrelation(ident, 200)
     assert set(acf) == {"alpha_l", "alpha_r", "x_ch", "gamma_ch"}
     for values, rows in acf.values():
         assert values[0] == pytest.approx(1.0) and np.nanmax(np.abs(values)) <= 1.0 + 1e-9 and rows > 100

@@ -83,7 +83,7 @@ def test_no_event_on_a_slip_free_log(seed):
     result, rows = _run(seed, SlipSettings())
     assert result.slip_intervals(0.01) == []
     assert rows.slip_events == () and rows.counts.slip == 0
-    assert rows.slip_threshold == IdentificationSettings().slip_floor
+    assert rows.slip_threshold == IdentificationSettings().rows.slip_floor
 
 
 @pytest.mark.parametrize("mode", list(Mode))

@@ -53,7 +53,7 @@ def test_literal_defaults_equal_the_library_constants():
     assert _defaults.STOP_TOLERANCE == STOP_TOLERANCE
     assert _defaults.MODE_TOLERANCE == MODE_TOLERANCE
     assert _defaults.ESTIMATORS == tuple(ESTIMATORS)
-    assert _defaults.UNCERTAINTY == IdentificationSettings().uncertainty
+    assert _defaults.UNCERTAINTY == IdentificationSettings().uncertainty.method.value
 
 
 def test_package_names_are_still_there():

@@ -49,7 +49,7 @@ def test_wrong_parameters_are_seen(lane_log, tmp_path):
 
 
 def test_literal_filtering_option(lane_log):
-    val = validate(lane_log, PAPER_PARAMETERS, PROTOTYPE, settings=IdentificationSettings(filtering="literal"))
+    val = validate(lane_log, PAPER_PARAMETERS, PROTOTYPE, settings=IdentificationSettings.from_flat(filtering="literal"))
     assert max(val.nrmse_moving.values()) < 1e-3
     frame = val.torques_frame()
     assert {"measured", "model", "kept", "coordinate"} <= set(frame.columns)

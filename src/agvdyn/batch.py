@@ -12,7 +12,7 @@ A YAML manifest lists the jobs::
         mapping: mappings/bag.yaml
         estimator: robust
         uncertainty: hac
-        settings: {stiction_threshold: 0.05}   # further IdentificationSettings keywords
+        settings: {stiction_threshold: 0.05}   # further IdentificationSettings keywords (flat names, from_flat)
         tags: {fleet: north, tyres: new}
 
 Relative paths are taken from the manifest's folder. Each job is a pure function of its inputs
@@ -73,7 +73,7 @@ class BatchJob:
             keywords["estimator"] = self.estimator
         if self.uncertainty is not None:
             keywords["uncertainty"] = self.uncertainty
-        return IdentificationSettings(**keywords)
+        return IdentificationSettings.from_flat(**keywords)
 
     def fixed(self) -> dict[str, float]:
         from agvdyn.identification import DEFAULT_FIXED
@@ -211,7 +211,9 @@ def run_job(job: BatchJob) -> list[dict[str, Any]]:
         rows.append({"job": job.name, "parameter": name, "value": value, "std": std,
                      "ci_low": value - _Z95 * std, "ci_high": value + _Z95 * std, "fixed": fixed,
                      "cond": float(ident.condition_number), "rows": int(ident.n_rows), "seconds": seconds,
-                     "estimator": settings.estimator, "uncertainty": str(ident.uncertainty.get("method", settings.uncertainty)),
+                     "estimator": settings.fit.estimator.value,
+                     "uncertainty": settings.uncertainty.method.value if ident.uncertainty is None
+                     else str(ident.uncertainty.method),
                      "tags": job.tags, "logs": ";".join(job.logs), "error": ""})
     return rows
 

@@ -74,7 +74,7 @@ def run_study_case(case: StudyCase) -> list[dict[str, Any]]:
         t0 = time.perf_counter()
         error = ""
         try:
-            ident = identify(log, geometry, settings=IdentificationSettings(
+            ident = identify(log, geometry, settings=IdentificationSettings.from_flat(
                 estimator=estimator, uncertainty=uncertainty, **(case.options or {})), keep_blocks=False, workers=1)
         except ValueError as exc:
             ident, error = None, str(exc).splitlines()[0]

@@ -237,8 +237,8 @@ def _timeline(t: np.ndarray, modes: np.ndarray, min_duration: float) -> tuple[tu
 def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: IdentificationSettings
                 ) -> list[Excitation]:
     blocks = [b for r in rows for b in r.blocks]
-    A, y = stacked_system(blocks, offsets=settings.torque_offsets)
-    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if settings.torque_offsets else [])
+    A, y = stacked_system(blocks, offsets=settings.fit.torque_offsets)
+    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if settings.fit.torque_offsets else [])
     free = [n for n in names if n not in fixed]
     out = {n: Excitation(n, "fixed") for n in PARAMETER_NAMES if n in fixed}
     if A.shape[0] <= len(free):
@@ -247,7 +247,7 @@ def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: I
     idx = [names.index(n) for n in free]
     A1 = A[:, idx]
     y1 = y - A[:, [names.index(n) for n in fixed]] @ np.array(list(fixed.values())) if fixed else y
-    missing = {d.name for d in dependent_parameters(A1, free, tolerance=settings.rank_tolerance)}
+    missing = {d.name for d in dependent_parameters(A1, free, tolerance=settings.fit.rank_tolerance)}
     keep = [i for i, n in enumerate(free) if n not in missing]
     inflation = variance_inflation(A1[:, keep])
     est = LeastSquares().fit(A1[:, keep], y1)
@@ -257,8 +257,8 @@ def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: I
             continue
         rel = float(est.std_[j] / abs(est.coef_[j])) if est.coef_[j] != 0 else math.inf
         # as identify: a poorly conditioned parameter counts when the rows determine it (fit.py)
-        weak = (inflation[j] > settings.max_inflation and not rel <= COLLINEAR_RELATIVE_STD) \
-            or rel > settings.max_relative_std
+        weak = (inflation[j] > settings.fit.max_inflation and not rel <= COLLINEAR_RELATIVE_STD) \
+            or rel > settings.fit.max_relative_std
         out[n] = Excitation(n, "weak" if weak else "ok", float(inflation[j]), rel)
     out.update({n: Excitation(n, "not excited") for n in missing if n in PARAMETER_NAMES})
     return [out[n] for n in PARAMETER_NAMES]
@@ -272,7 +272,8 @@ def preflight(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, fl
         rows = log_rows(log, geometry, settings)
         all_rows.append(rows)
         _, cuts = stretch_bounds(log.t, log.alpha, log.beta, settings)
-        files.append(FileCheck(summarize_log(log, geometry, tolerance=settings.mode_tolerance, min_duration=min_duration),
+        files.append(FileCheck(summarize_log(log, geometry, tolerance=settings.rows.mode_tolerance,
+                                             min_duration=min_duration),
                                rows, _timeline(log.t, rows.modes, min_duration), tuple(cuts),
                                _row_runs(log.t, rows.modes, log.sample_time)))
         c = rows.counts

@@ -17,16 +17,18 @@ Design
   equation ``Phi p = y`` (regressor columns and torques), run by run.
 
 All functions take arrays with time along ``axis`` (default 0, the project's convention).
+:class:`FilterSettings`, :class:`DerivativeScheme` and :func:`guarded_mask` live in the low module
+:mod:`agvdyn.row_rules` (the planner shares them) and are re-exported here.
 """
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
-from enum import Enum
 
 import numpy as np
 
+from agvdyn.segments_vocabulary import IDENTIFICATION_SEGMENTS, VOCABULARY
+from agvdyn.row_rules import DerivativeScheme, FilterSettings, _design, guarded_mask
 from agvdyn.time_base import stamp_interval
 
 __all__ = [
@@ -46,64 +48,6 @@ __all__ = [
     "uniform_sample_time",
     "filter_design",
 ]
-
-
-class DerivativeScheme(str, Enum):
-    """Finite-difference scheme of :func:`time_derivative`."""
-
-    #: second-order central differences inside, second-order one-sided at the ends (np.gradient)
-    CENTRAL = "central"
-
-
-@dataclass(frozen=True)
-class FilterSettings:
-    """Zero-phase Butterworth low-pass used for every signal (paper sec. 7).
-
-    Parameters
-    ----------
-    cutoff : float
-        Cut-off angular frequency ``omega_g`` in rad/s (paper: 40 rad/s).
-    order : int
-        Order of the Butterworth prototype; the forward-backward pass doubles it.
-    derivative : DerivativeScheme
-        Finite-difference scheme applied after filtering.
-    """
-
-    cutoff: float = 40.0
-    order: int = 4
-    derivative: DerivativeScheme = DerivativeScheme.CENTRAL
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.cutoff, (int, float)) or not math.isfinite(self.cutoff) or self.cutoff <= 0:
-            raise ValueError(f"filter cutoff={self.cutoff!r} rad/s: expected a finite number > 0")
-        if isinstance(self.order, bool) or not isinstance(self.order, int) or not 1 <= self.order <= 12:
-            raise ValueError(f"filter order={self.order!r}: expected an integer in 1..12")
-        object.__setattr__(self, "cutoff", float(self.cutoff))
-        object.__setattr__(self, "derivative", DerivativeScheme(self.derivative))
-
-    def sos(self, dt: float) -> np.ndarray:
-        """Second-order sections of the digital Butterworth filter for sample time ``dt`` (s)."""
-        nyquist = math.pi / dt  # rad/s
-        if self.cutoff >= nyquist:
-            raise ValueError(
-                f"filter cutoff {self.cutoff} rad/s is not below the Nyquist frequency {nyquist:.6g} rad/s "
-                f"of the sample time {dt} s"
-            )
-        return _design(self.order, self.cutoff / nyquist)[0].copy()
-
-    def padlen(self, dt: float) -> int:
-        """Number of samples ``sosfiltfilt`` pads at each end (its default for these sections)."""
-        sos = self.sos(dt)
-        return 3 * (2 * len(sos) + 1 - min((sos[:, 2] == 0).sum(), (sos[:, 5] == 0).sum()))
-
-
-@functools.lru_cache(maxsize=64)
-def _design(order: int, normalized_cutoff: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sections and ``sosfilt_zi`` of a Butterworth low-pass, designed once per order and cut-off
-    (kept on disk: :mod:`agvdyn._filter_cache`)."""
-    from agvdyn._filter_cache import butterworth_lowpass
-
-    return butterworth_lowpass(order, normalized_cutoff)
 
 
 def filter_design(dt: float, settings: FilterSettings = FilterSettings()) -> tuple[np.ndarray, np.ndarray, int]:
@@ -267,49 +211,16 @@ def stiction_mask(s_dot: np.ndarray, threshold: float | np.ndarray) -> np.ndarra
     return np.abs(s_dot) >= threshold
 
 
-def guarded_mask(keep: np.ndarray, guard: int, *, axis: int = 0) -> np.ndarray:
-    """``keep`` with every row within ``guard`` samples of a dropped row (or of an end) dropped too.
-
-    A zero-phase filter spreads each sample over about ``2 / omega_g`` on both sides, so rows next
-    to the stiction rows carry what happens at low speed (stick/slip, wheel slip, the tanh
-    transition) after filtering; this removes them. O(N) by cumulative sums.
-
-    Examples
-    --------
-    >>> guarded_mask(np.array([True, True, True, False, True, True, True, True]), 1).tolist()
-    [False, True, False, False, False, True, True, False]
-    """
-    keep = np.asarray(keep, dtype=bool)
-    if guard < 0:
-        raise ValueError(f"guard={guard!r}: expected >= 0 samples")
-    if guard == 0:
-        return keep.copy()
-    moved = np.moveaxis(keep, axis, 0)
-    n = moved.shape[0]
-    bad = np.concatenate([np.ones((guard,) + moved.shape[1:], dtype=np.int64), (~moved).astype(np.int64),
-                          np.ones((guard,) + moved.shape[1:], dtype=np.int64)])
-    cs = np.concatenate([np.zeros((1,) + moved.shape[1:], dtype=np.int64), np.cumsum(bad, axis=0)])
-    window = cs[2 * guard + 1: 2 * guard + 1 + n] - cs[:n]  # bad rows in [i - guard, i + guard]
-    return np.moveaxis(window == 0, 0, axis)
-
-
-#: Mode of each named experiment phase (PLATFORM.md, log column ``segment``). ``None``: excluded.
-#: ``align`` (re-orienting the wheels at rest between two experiments) is physically mode 1, but
-#: it is a short, rate-limited transition rather than a planned excitation; its rows sit next to
-#: accelerating or braking phases where wheel slip is largest, so it is excluded from the
-#: regression (pass ``segment_modes`` to include it).
+#: Mode of each named experiment phase (PLATFORM.md, log column ``segment``;
+#: :mod:`agvdyn.segments_vocabulary`). ``None``: excluded. ``align`` (re-orienting the wheels at rest
+#: between two experiments) is physically mode 1, but it is a short, rate-limited transition rather
+#: than a planned excitation; its rows sit next to accelerating or braking phases where wheel slip
+#: is largest, so it is excluded from the regression (pass ``segment_modes`` to include it), as are
+#: the lifted-wheel test and ``rest`` (rows at standstill; a name of raw arrays, not of the log schema).
 SEGMENT_MODES: dict[str, str | None] = {
-    "steer_left": "1",
-    "steer_right": "1",
-    "straight": "2s",
-    "rotation": "4",
-    "lateral": "3",
-    "lane_change": "2",
-    "align": None,
+    **{s.name: s.mode if s.regression else None for s in VOCABULARY},
     "rest": None,
 }
-#: The paper's identification experiments, in their execution order (sec. 6.2).
-IDENTIFICATION_SEGMENTS = ("steer_left", "steer_right", "straight", "rotation")
 
 
 def modes_from_segments(segment: np.ndarray, *, segment_modes: dict[str, str | None] | None = None,

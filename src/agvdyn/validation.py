@@ -98,7 +98,7 @@ class Validation:
             "nrmse_without_stiction": {k: clean(v) for k, v in self.nrmse_moving.items()},
             "definition": "RMS(measured - model) / RMS(measured) per generalized coordinate",
             "rows": {k: int(v) for k, v in self.table["n_rows"].items()},
-            "filtering": self.settings.filtering.value,
+            "filtering": self.settings.rows.filtering.value,
             "notes": list(self.notes),
         }
 

@@ -123,7 +123,7 @@ def print_parameters(console: Console, ident) -> None:
             ref = getattr(PAPER_PARAMETERS, name)
             cells += [f"{ref:.6g}", f"{100 * (value / ref - 1):+.2f} %"]
         rows.append(cells)
-    unc = ident.uncertainty.get("method", "classic")
+    unc = ident.uncertainty.method if ident.uncertainty is not None else "classic"
     print_items(console, "Identified parameters", [f"({ident.estimator}, std by {unc};",
                 f"cond(Theta_1w^T Theta_1w) = {ident.condition_number:.4g},", f"{ident.n_rows:,} rows)"], sep="")
     print_table(console, "", columns, rows)

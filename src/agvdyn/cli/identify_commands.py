@@ -12,7 +12,7 @@ from rich.console import Console
 from agvdyn.cli._app import app, fail, numbers_by_name
 from agvdyn.cli._outputs import log_inputs, refuse_overwrite
 from agvdyn.cli._tables import Column, print_items, print_parameters, print_table
-from agvdyn.cli._defaults import UNCERTAINTY
+from agvdyn.cli import _defaults as D
 
 # The library (scipy, numba) is imported inside the functions that use it: ``agvdyn --help`` stays fast.
 
@@ -82,13 +82,16 @@ def _fixed(items: Optional[list[str]]) -> dict[str, float]:
     return numbers_by_name("--fix", items, PARAMETER_NAMES)
 
 
-def _settings(filtering: str, cutoff: float, order: int, stiction: float, segments: Optional[str],
-              steering_stiction: float = 0.1, offsets: bool = True, guard: float = 2.0, steering_guard: float = 4.0,
-              max_inflation: float = 100.0, max_relative_std: float = 0.5,
-              slip_threshold: Optional[float] = None, estimator: str = "wls", uncertainty: str = UNCERTAINTY,
-              bandwidth: Optional[int] = None, unexcited: Optional[str] = None,
-              torque_lead: Optional[float] = None) -> "IdentificationSettings":  # noqa: F821
-    from agvdyn.identification import Filtering, IdentificationSettings
+def _settings(*, filtering: str = D.FILTERING, cutoff: float = D.CUTOFF, order: int = D.ORDER,
+              stiction: float = D.STICTION, steering_stiction: float = D.STEERING_STICTION,
+              stiction_guard: float = D.STICTION_GUARD, steering_guard: float = D.STEERING_GUARD,
+              segments: Optional[str] = None, slip_threshold: Optional[float] = None,
+              torque_lead: Optional[float] = None, offsets: bool = D.OFFSETS, max_inflation: float = D.MAX_INFLATION,
+              max_relative_std: float = D.MAX_RELATIVE_STD, estimator: str = D.ESTIMATOR,
+              unexcited: Optional[str] = None, uncertainty: str = D.UNCERTAINTY,
+              bandwidth: Optional[int] = None) -> "IdentificationSettings":  # noqa: F821
+    """The identification settings of the options (``_defaults.OPTION_FIELDS`` names the field each sets)."""
+    from agvdyn.identification import Filtering, FitSettings, IdentificationSettings, RowSettings, UncertaintySettings
     from agvdyn.signals import FilterSettings
 
     try:
@@ -96,14 +99,15 @@ def _settings(filtering: str, cutoff: float, order: int, stiction: float, segmen
     except ValueError:
         raise fail(f"--filtering {filtering!r}: expected one of {[f.value for f in Filtering]}") from None
     try:
-        return IdentificationSettings(
-            filter=FilterSettings(cutoff=cutoff, order=order), filtering=mode,
-            stiction_threshold=stiction, steering_threshold=steering_stiction, torque_offsets=offsets,
-            stiction_guard=guard, steering_guard=steering_guard, max_inflation=max_inflation,
-            max_relative_std=max_relative_std,
-            slip_threshold=slip_threshold, estimator=estimator, uncertainty=uncertainty, bandwidth=bandwidth,
-            unexcited=unexcited, torque_lead=torque_lead,
+        rows = RowSettings(
+            filter=FilterSettings(cutoff=cutoff, order=order), filtering=mode, stiction_threshold=stiction,
+            steering_threshold=steering_stiction, stiction_guard=stiction_guard, steering_guard=steering_guard,
+            slip_threshold=slip_threshold, torque_lead=torque_lead,
             segments=None if segments is None else tuple(s.strip() for s in segments.split(",") if s.strip()))
+        fit = FitSettings(torque_offsets=offsets, max_inflation=max_inflation, max_relative_std=max_relative_std,
+                          estimator=estimator, unexcited=unexcited)
+        return IdentificationSettings(rows=rows, fit=fit,
+                                      uncertainty=UncertaintySettings(method=uncertainty, bandwidth=bandwidth))
     except ValueError as exc:
         raise fail(str(exc)) from exc
 
@@ -137,20 +141,20 @@ def identify(
     platform: PlatformOpt = None,
     fix: FixOpt = None,
     mapping: MappingOpt = None,
-    filtering: FilteringOpt = "parallel",
-    cutoff: CutoffOpt = 40.0,
-    order: OrderOpt = 4,
-    stiction: StictionOpt = 0.05,
-    steering_stiction: SteeringStictionOpt = 0.1,
-    stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 4.0,
-    offsets: OffsetsOpt = True,
+    filtering: FilteringOpt = D.FILTERING,
+    cutoff: CutoffOpt = D.CUTOFF,
+    order: OrderOpt = D.ORDER,
+    stiction: StictionOpt = D.STICTION,
+    steering_stiction: SteeringStictionOpt = D.STEERING_STICTION,
+    stiction_guard: GuardOpt = D.STICTION_GUARD,
+    steering_guard: SteeringGuardOpt = D.STEERING_GUARD,
+    offsets: OffsetsOpt = D.OFFSETS,
     segments: SegmentsOpt = None,
-    max_inflation: MaxInflationOpt = 100.0,
-    max_relative_std: MaxRelativeStdOpt = 0.5,
+    max_inflation: MaxInflationOpt = D.MAX_INFLATION,
+    max_relative_std: MaxRelativeStdOpt = D.MAX_RELATIVE_STD,
     slip_threshold: SlipThresholdOpt = None,
-    estimator: EstimatorOpt = "wls",
-    uncertainty: UncertaintyOpt = UNCERTAINTY,
+    estimator: EstimatorOpt = D.ESTIMATOR,
+    uncertainty: UncertaintyOpt = D.UNCERTAINTY,
     bandwidth: BandwidthOpt = None,
     unexcited: UnexcitedOpt = None,
     torque_lead: TorqueLeadOpt = None,
@@ -169,9 +173,12 @@ def identify(
     refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--platform": platform, "--mapping": mapping},
                      kinds={"--out": "parameter file"})
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
-                         bandwidth, unexcited, torque_lead)
+    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
+                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
+                         steering_guard=steering_guard, segments=segments, slip_threshold=slip_threshold,
+                         torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
+                         max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
+                         uncertainty=uncertainty, bandwidth=bandwidth)
     # logs are read one at a time inside identify(): memory does not grow with their number
     ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False,
                         workers=threads)
@@ -235,21 +242,22 @@ def validate(
         help="Platform file (YAML); default: the platform stored in the parameter file, else the platform in "
              "the log's sidecar, else the built-in prototype.")] = None,
     mapping: MappingOpt = None,
-    filtering: FilteringOpt = "parallel",
-    cutoff: CutoffOpt = 40.0,
-    order: OrderOpt = 4,
-    stiction: StictionOpt = 0.05,
-    steering_stiction: SteeringStictionOpt = 0.1,
-    stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 4.0,
+    filtering: FilteringOpt = D.FILTERING,
+    cutoff: CutoffOpt = D.CUTOFF,
+    order: OrderOpt = D.ORDER,
+    stiction: StictionOpt = D.STICTION,
+    steering_stiction: SteeringStictionOpt = D.STEERING_STICTION,
+    stiction_guard: GuardOpt = D.STICTION_GUARD,
+    steering_guard: SteeringGuardOpt = D.STEERING_GUARD,
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
     from agvdyn.platform import PROTOTYPE, platform_of_parameters, read_parameters, read_platform
     from agvdyn.validation import validate as validate_log
 
-    settings = _settings(filtering, cutoff, order, stiction, None, steering_stiction, True, stiction_guard,
-                         steering_guard)
+    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
+                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
+                         steering_guard=steering_guard)
     try:
         content = read_parameters(params)
         override = None if platform is None else read_platform(platform)
@@ -300,20 +308,20 @@ def report(
     platform: PlatformOpt = None,
     fix: FixOpt = None,
     mapping: MappingOpt = None,
-    filtering: FilteringOpt = "parallel",
-    cutoff: CutoffOpt = 40.0,
-    order: OrderOpt = 4,
-    stiction: StictionOpt = 0.05,
-    steering_stiction: SteeringStictionOpt = 0.1,
-    stiction_guard: GuardOpt = 2.0,
-    steering_guard: SteeringGuardOpt = 4.0,
-    offsets: OffsetsOpt = True,
+    filtering: FilteringOpt = D.FILTERING,
+    cutoff: CutoffOpt = D.CUTOFF,
+    order: OrderOpt = D.ORDER,
+    stiction: StictionOpt = D.STICTION,
+    steering_stiction: SteeringStictionOpt = D.STEERING_STICTION,
+    stiction_guard: GuardOpt = D.STICTION_GUARD,
+    steering_guard: SteeringGuardOpt = D.STEERING_GUARD,
+    offsets: OffsetsOpt = D.OFFSETS,
     segments: SegmentsOpt = None,
-    max_inflation: MaxInflationOpt = 100.0,
-    max_relative_std: MaxRelativeStdOpt = 0.5,
+    max_inflation: MaxInflationOpt = D.MAX_INFLATION,
+    max_relative_std: MaxRelativeStdOpt = D.MAX_RELATIVE_STD,
     slip_threshold: SlipThresholdOpt = None,
-    estimator: EstimatorOpt = "wls",
-    uncertainty: UncertaintyOpt = UNCERTAINTY,
+    estimator: EstimatorOpt = D.ESTIMATOR,
+    uncertainty: UncertaintyOpt = D.UNCERTAINTY,
     bandwidth: BandwidthOpt = None,
     unexcited: UnexcitedOpt = None,
     torque_lead: TorqueLeadOpt = None,
@@ -332,9 +340,12 @@ def report(
                                "--reference": reference, "--plan": plan, "--platform": platform, "--mapping": mapping},
                      kinds)
     fixed = _fixed(fix)
-    settings = _settings(filtering, cutoff, order, stiction, segments, steering_stiction, offsets, stiction_guard,
-                         steering_guard, max_inflation, max_relative_std, slip_threshold, estimator, uncertainty,
-                         bandwidth, unexcited, torque_lead)
+    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
+                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
+                         steering_guard=steering_guard, segments=segments, slip_threshold=slip_threshold,
+                         torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
+                         max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
+                         uncertainty=uncertainty, bandwidth=bandwidth)
     try:
         ref = None if reference is None else reference_from_file(reference)
     except (ValueError, OSError) as exc:

@@ -82,12 +82,12 @@ def inspect(
 
     Exit codes: 0 ok (with --strict: ready), 1 with --strict: not ready (a parameter not or weakly excited), 2 bad input.
     """
-    from agvdyn.identification import IdentificationSettings, load_logs, platform_for
+    from agvdyn.identification import IdentificationSettings, RowSettings, load_logs, platform_for
     from agvdyn.preflight import preflight
 
     fixed = _fixed(fix)
     try:
-        settings = IdentificationSettings(mode_tolerance=tolerance)
+        settings = IdentificationSettings(rows=RowSettings(mode_tolerance=tolerance))
         loaded = load_logs(logs, mapping=mapping, platform=platform, stop_tolerance=stop_tolerance)
         geom = platform_for(loaded, platform)
         result = preflight(loaded, geom, fixed=fixed, settings=settings, min_duration=min_duration)

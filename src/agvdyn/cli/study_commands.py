@@ -51,8 +51,8 @@ def montecarlo(
     if runs < 2:
         raise fail(f"--runs {runs}: expected at least 2")
     defaults = IdentificationSettings()
-    estimators = estimator or [defaults.estimator]
-    methods = uncertainty or [defaults.uncertainty]
+    estimators = estimator or [defaults.fit.estimator.value]
+    methods = uncertainty or [defaults.uncertainty.method.value]
     for e in estimators:
         if e not in ESTIMATORS:
             raise fail(f"--estimator {e!r}: expected one of {sorted(ESTIMATORS)}")

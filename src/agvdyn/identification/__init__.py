@@ -34,14 +34,22 @@ from agvdyn.identification.settings import (
     EXCITATION,
     OFFSET_NAMES,
     STEERING_COORDINATES,
+    EstimatorName,
     Filtering,
+    FitSettings,
     IdentificationSettings,
+    RobustLoss,
+    RowSettings,
+    UncertaintyMethod,
+    UncertaintySettings,
+    Unexcited,
 )
 from agvdyn.identification.slip import SlipEvent
 
 __all__ = [
     "DEFAULT_FIXED", "EXCITATION", "OFFSET_NAMES", "STEERING_COORDINATES", "CHASSIS_COORDINATES",
-    "Filtering", "IdentificationSettings", "EquationBlock", "UnidentifiableError", "ImplausibleError", "SignConventionError",
+    "Filtering", "IdentificationSettings", "RowSettings", "FitSettings", "UncertaintySettings", "EstimatorName",
+    "RobustLoss", "Unexcited", "UncertaintyMethod", "EquationBlock", "UnidentifiableError", "ImplausibleError", "SignConventionError",
     "Dependency", "Estimator", "LeastSquares", "Identification", "SlipEvent", "RowCounts", "LogRows",
     "equation_block", "generalized_velocity", "log_equations", "log_rows", "row_modes", "stacked_system",
     "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "fit_regression", "load_logs", "platform_for",

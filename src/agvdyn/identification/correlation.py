@@ -1,5 +1,7 @@
 """Integrated autocorrelation time of the scores of a regression (Sokal's window), pooled over
-recordings: the bandwidth of the HAC and the jackknife's block length (:mod:`.uncertainty`)."""
+recordings: the bandwidth of the HAC and the jackknife's block length (:mod:`.uncertainty`); and
+the masked autocorrelation of a signal in pieces (the residuals' autocorrelation of the report),
+both from one FFT autocovariance (:func:`autocovariance_sums`)."""
 from __future__ import annotations
 
 import itertools
@@ -10,7 +12,7 @@ import scipy.fft
 
 from agvdyn.identification._threads import ordered_map
 
-__all__ = ["correlation_time"]
+__all__ = ["correlation_time", "autocovariance_sums", "masked_autocorrelation"]
 
 
 def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *, window: float = 5.0,
@@ -56,10 +58,43 @@ def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
     n = x.shape[0]
     peak = float(np.abs(x).max()) if x.size else 0.0
     single = peak * peak * max(n, 1) < 1e30  # float32 overflows at 3.4e38; rounding in the FFT adds headroom
+    return autocovariance_sums(x, single=single, fft_threads=fft_threads)
+
+
+def autocovariance_sums(x: np.ndarray, *, single: bool = False, fft_threads: int = -1) -> np.ndarray:
+    """Unnormalised autocovariance sums ``c[l, j] = sum_i x[i, j] x[i + l, j]``, lags ``0..n-1``,
+    of the columns of ``x`` (n, p), by FFT zero-padded to at least ``2n`` (no wrap-around); in
+    double precision unless ``single``. The one autocorrelation of the package: the correlation
+    time of the scores here, the residuals' autocorrelation of the report
+    (:func:`masked_autocorrelation`)."""
+    n = x.shape[0]
     x = np.ascontiguousarray(x.T, dtype=np.float32 if single else np.float64)
     size = scipy.fft.next_fast_len(2 * n, real=True)
     f = scipy.fft.rfft(x, size, axis=1, workers=fft_threads)
     return scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=fft_threads)[:, :n].T.astype(float)
+
+
+def masked_autocorrelation(pieces: Iterable[tuple[np.ndarray, np.ndarray]], max_lag: int
+                           ) -> tuple[np.ndarray, int]:
+    """Autocorrelation ``rho(l)``, ``l = 0..max_lag``, of a series given in pieces ``(x, keep)``
+    (the runs of one signal), where only pairs of kept samples count: the mean of the kept samples
+    of all pieces is removed, and each lag's sum of products is divided by its number of kept pairs
+    (masked sums), so that left-out samples neither add nor break correlation. Returns ``(rho,
+    kept samples)``; NaN at lags without a pair."""
+    pieces = [(np.asarray(x, dtype=float), np.asarray(k, dtype=bool)) for x, k in pieces]
+    kept = sum(int(k.sum()) for _, k in pieces)
+    mean = sum(float(x[k].sum()) for x, k in pieces) / kept if kept else 0.0
+    num, pairs = np.zeros(max_lag + 1), np.zeros(max_lag + 1)
+    for x, k in pieces:
+        if not k.any():
+            continue
+        sums = autocovariance_sums(np.column_stack([np.where(k, x - mean, 0.0), k.astype(float)]))
+        lags = min(max_lag + 1, x.size)
+        num[:lags] += sums[:lags, 0]
+        pairs[:lags] += np.rint(sums[:lags, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = np.where(pairs > 0, num / pairs, np.nan)
+    return cov / cov[0], kept
 
 
 def _pad_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from agvdyn.identification.regression import (
     dependent_parameters,
     variance_inflation,
 )
-from agvdyn.identification.result import Identification
+from agvdyn.identification.result import Identification, ParameterCorrelation, UncertaintySummary
 from agvdyn.identification.rows import RowCounts
 from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.slip import SlipEvent
@@ -71,12 +71,12 @@ def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Ma
     ``account``: sources, notes, n_samples, rows, slip_events, slip_thresholds of the result."""
     fixed = check_fixed(fixed)
     blocks = tuple(blocks)
-    _, _, idx_free, p_fixed = columns(fixed, settings.torque_offsets)
+    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
     if stacked:
-        data = stacked_regression_data(blocks, idx_free, p_fixed, offsets=settings.torque_offsets)
+        data = stacked_regression_data(blocks, idx_free, p_fixed, offsets=settings.fit.torque_offsets)
     else:
         stats, store, names = RowStatistics(len(p_fixed)), RowStore(), {}
-        row_statistics(blocks, stats, store, names, offsets=settings.torque_offsets)
+        row_statistics(blocks, stats, store, names, offsets=settings.fit.torque_offsets)
         data = regression_data(stats, names, idx_free, p_fixed, store)
     account.setdefault("n_samples", sum(b.t.size for b in blocks))
     return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
@@ -92,9 +92,9 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     (eq. 24), rank check naming what is not excited, scaled least squares (eq. 25), uncertainty
     (``workers`` threads), physical plausibility."""
     fixed = check_fixed(fixed)
-    with_offsets = settings.torque_offsets
+    with_offsets = settings.fit.torque_offsets
     names, free, idx_free, p_fixed = columns(fixed, with_offsets)
-    est = estimator if estimator is not None else settings.make_estimator()
+    est = estimator if estimator is not None else settings.fit.make_estimator()
     if data.pseudo and getattr(est, "needs_rows", False):  # robust weighs single rows: read them back
         data = data.stacked()
     A1, y1 = data.A, data.y
@@ -102,9 +102,9 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         raise UnidentifiableError(
             [Dependency(n, (), 0.0) for n in free],
             f"{data.n_rows} equation rows left after the stiction mask for {len(free)} parameters; ")
-    report = settings.reports_unexcited
+    report = settings.fit.reports_unexcited
     warnings: list[str] = []
-    missing = dependent_parameters(A1, free, tolerance=settings.rank_tolerance)
+    missing = dependent_parameters(A1, free, tolerance=settings.fit.rank_tolerance)
     unbounded: set[str] = set()
     if missing and not report:
         raise UnidentifiableError(missing)
@@ -118,18 +118,18 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         A1, y1 = data.A, data.y
     inflation = variance_inflation(A1)
     collinear = [Dependency(n, (), math.nan, inflation=float(v)) for n, v in zip(free, inflation)
-                 if v > settings.max_inflation and n in PARAMETER_NAMES]
+                 if v > settings.fit.max_inflation and n in PARAMETER_NAMES]
     pseudo = {"group_rows": data.group_rows, "n_rows": data.n_rows} if data.pseudo else {}
     est = est.fit(A1, y1, groups=data.group, names=free, **pseudo)
-    warnings += _collinear_warnings(collinear, data, est.coef_, free, settings.max_inflation, refuse=not report)
+    warnings += _collinear_warnings(collinear, data, est.coef_, free, settings.fit.max_inflation, refuse=not report)
     if data.pseudo and data.store is not None:  # eq. (25)'s sigma^2 from the rows themselves
         weights = np.ones(len(data.group_names))
         weights[data.group] = est.weights_
         sigma2 = float(data.group_rss(est.coef_) @ weights) / (data.n_rows - len(free))
         est.cov_, est.sigma2_ = est.cov_ * (sigma2 / est.sigma2_), sigma2
-    unc = parameter_uncertainty(settings.uncertainty, est, data, bandwidth=settings.bandwidth,
-                                bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
-                                replicates=settings.bootstrap_replicates, seed=settings.seed,
+    u = settings.uncertainty
+    unc = parameter_uncertainty(u.method, est, data, bandwidth=u.bandwidth, bandwidth_factor=u.bandwidth_factor,
+                                min_bandwidth=u.min_bandwidth, replicates=u.bootstrap_replicates, seed=u.seed,
                                 names=free, reported=PARAMETER_NAMES, workers=workers)
     sd_all, bad_variances = std_from_covariance(unc.cov, free)
     warnings += list(unc.warnings) + bad_variances
@@ -161,7 +161,7 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         all_std[n] = math.inf
         if n in PARAMETER_NAMES:
             std[n] = std_classic[n] = math.inf
-    if settings.plausibility:
+    if settings.fit.plausibility:
         refused, implausible = implausible_parameters({n: float(v) for n, v in zip(free, est.coef_)
                                                        if n in PARAMETER_NAMES and n not in unbounded}, std)
         if refused:
@@ -169,10 +169,10 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         warnings += implausible
     noisy = [Dependency(n, (), math.nan, relative_std=float(sd / abs(v)))
              for n, v, sd in zip(free, est.coef_, sd_all)
-             if n in PARAMETER_NAMES and n not in unbounded and sd > settings.max_relative_std * abs(v)]
+             if n in PARAMETER_NAMES and n not in unbounded and sd > settings.fit.max_relative_std * abs(v)]
     if noisy and not report:
         raise UnidentifiableError(noisy, f"weakly excited data (standard deviation above "
-                                         f"{100 * settings.max_relative_std:g} % of the value): ")
+                                         f"{100 * settings.fit.max_relative_std:g} % of the value): ")
     warnings += [f"weakly excited: {d.describe()}" for d in noisy]
     return Identification(
         parameters=Parameters.from_vector(p), std=std, fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
@@ -180,10 +180,10 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
         condition_number_with_offsets=cond_with_offsets,
         residual_rms=residual_rms, n_rows=int(data.n_rows), n_samples=int(n_samples), blocks=tuple(blocks), settings=settings, geometry=geometry, sources=tuple(sources), notes=tuple(notes),
         estimator=getattr(est, "name", "") or type(est).__name__,
-        std_classic=std_classic, correlation=correlation,
-        uncertainty={"method": unc.method.value, **unc.details,
-                     **({} if unc.dof is None else {"dof": {n: (float(v) if math.isfinite(v) else None)
-                                                              for n, v in zip(free, unc.dof) if n in PARAMETER_NAMES}})},
+        std_classic=std_classic,
+        correlation=ParameterCorrelation(tuple(correlation["names"]), tuple(map(tuple, correlation["matrix"]))),
+        uncertainty=UncertaintySummary.of(unc.method.value, unc.details, None if unc.dof is None else {
+            n: (float(v) if math.isfinite(v) else None) for n, v in zip(free, unc.dof) if n in PARAMETER_NAMES}),
         quantiles={n: float(q) for n, q in zip(free, unc.quantile()) if n in PARAMETER_NAMES},
         active_bounds=tuple(getattr(est, "active_", ())),
         downweighted_rows=int(np.count_nonzero(getattr(est, "downweighted_", []))),

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +33,10 @@ from agvdyn.identification.rows import labels_present
 from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import filtered_stretch, log_source, min_stretch_rows, stretch_bounds
 from agvdyn.identification.normal import RegressionData, RowIndex
+from agvdyn.identification.result import UncertaintySummary
 from agvdyn.identification.uncertainty import parameter_uncertainty
 from agvdyn.platform import PARAMETER_UNITS, WHEELS, Geometry
-from agvdyn.signals import guarded_mask
+from agvdyn.row_rules import row_mask
 from agvdyn.time_base import stamp_interval
 
 __all__ = ["LIFTED_LABEL", "EXPERIMENTS", "LIFTED_PARAMETERS", "LiftedWheelIdentification", "is_lifted",
@@ -96,7 +97,7 @@ class LiftedWheelIdentification:
     settings: IdentificationSettings
     geometry: Geometry
     estimator: str
-    uncertainty: dict[str, Any] = field(default_factory=dict)
+    uncertainty: UncertaintySummary | None = None
     sources: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
 
@@ -133,7 +134,7 @@ class LiftedWheelIdentification:
             "n_samples": self.n_samples,
             "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
             "estimator": self.estimator,
-            "uncertainty": dict(self.uncertainty),
+            "uncertainty": {} if self.uncertainty is None else self.uncertainty.to_dict(),
             "sources": list(self.sources),
             "notes": list(self.notes),
             "platform": self.geometry.to_dict(),
@@ -174,7 +175,7 @@ def _lifted_rows(log: Any, geometry: Geometry, settings: IdentificationSettings,
     bounds, notes = stretch_bounds(log.t, log.alpha, log.beta, settings)
     notes = [f"{source}: {n}" for n in notes]
     min_rows = min_stretch_rows(settings, stamp_interval(np.asarray(log.t), source=f"{source}: column 't'"))
-    threshold = settings.stiction_threshold / geometry.r  # the chassis threshold as a wheel rate
+    threshold = settings.rows.stiction_threshold / geometry.r  # the chassis threshold as a wheel rate
     A, y, wheel, rec, step = [], [], [], [], []
     k = recording0
     for a, b in bounds:
@@ -182,12 +183,12 @@ def _lifted_rows(log: Any, geometry: Geometry, settings: IdentificationSettings,
             notes.append(f"{source}: rows {a}..{b - 1} ({b - a} samples) skipped: too short for the zero-phase filter")
             continue
         st = filtered_stretch(geometry, log, a, b, settings)
-        guard = int(round(settings.seconds(settings.stiction_guard) / st.dt))
+        guard = settings.rows.guard_samples(settings.rows.stiction_guard, st.dt)
         usable = ~st.edge
         if labelled is not None:
             usable &= labelled[a:b]
         for i in range(4):
-            keep = guarded_mask(np.abs(st.beta_dot[:, i]) >= threshold, guard) & usable
+            keep = row_mask(st.beta_dot[:, i], threshold, guard) & usable
             if not keep.any():
                 continue
             cols = [st.signals[keep, _SIGNAL[n] + i] for n in LIFTED_PARAMETERS]
@@ -223,20 +224,22 @@ def identify_lifted(logs: Sequence[Any], geometry: Geometry, *,
         n_rec += k
     if not A:
         raise ValueError("no usable lifted-wheel rows: the logs have no rows labelled 'lifted_wheel' with a wheel "
-                         f"turning faster than {settings.stiction_threshold / geometry.r:.3g} rad/s "
+                         f"turning faster than {settings.rows.stiction_threshold / geometry.r:.3g} rad/s "
                          "(the stiction threshold as a wheel rate)")
     A_, y_ = np.concatenate(A), np.concatenate(y)
     wheel_, rec_, step_ = np.concatenate(wheel), np.concatenate(rec), np.concatenate(step)
-    names = list(LIFTED_PARAMETERS) + (list(OFFSET_NAMES) if settings.torque_offsets else [])
-    if not settings.torque_offsets:
+    names = list(LIFTED_PARAMETERS) + (list(OFFSET_NAMES) if settings.fit.torque_offsets else [])
+    if not settings.fit.torque_offsets:
         A_ = A_[:, :3]
     present = [j for j in range(A_.shape[1]) if np.any(A_[:, j] != 0)]
     A_, names = A_[:, present], [names[j] for j in present]
-    est = (estimator if estimator is not None else settings.make_estimator()).fit(A_, y_, groups=wheel_, names=names)
+    est = estimator if estimator is not None else settings.fit.make_estimator()
+    est = est.fit(A_, y_, groups=wheel_, names=names)
     index = RowIndex(wheel_.astype(np.int64), tuple(WHEELS), rec_.astype(np.int64), step_.astype(np.int64))
-    unc = parameter_uncertainty(settings.uncertainty, est, RegressionData.from_rows(A_, y_, index), bandwidth=settings.bandwidth,
-                                bandwidth_factor=settings.bandwidth_factor, min_bandwidth=settings.min_bandwidth,
-                                replicates=settings.bootstrap_replicates, seed=settings.seed)
+    u = settings.uncertainty
+    unc = parameter_uncertainty(u.method, est, RegressionData.from_rows(A_, y_, index), bandwidth=u.bandwidth,
+                                bandwidth_factor=u.bandwidth_factor, min_bandwidth=u.min_bandwidth,
+                                replicates=u.bootstrap_replicates, seed=u.seed)
     sd = unc.std
     cols = A_[:, :3] / np.sqrt(np.einsum("ij,ij->j", A_[:, :3], A_[:, :3]))
     sv = np.linalg.svd(cols, compute_uv=False)
@@ -253,5 +256,5 @@ def identify_lifted(logs: Sequence[Any], geometry: Geometry, *,
         offsets={n: values[n] / 1.0 for n in OFFSET_NAMES if n in values},
         offsets_std={n: stds[n] for n in OFFSET_NAMES if n in stds},
         settings=settings, geometry=geometry, estimator=getattr(est, "name", "") or type(est).__name__,
-        uncertainty={"method": unc.method.value, **unc.details},
+        uncertainty=UncertaintySummary.of(unc.method.value, unc.details),
         sources=tuple(log_source(log) for log in logs), notes=tuple(notes))

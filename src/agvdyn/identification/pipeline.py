@@ -85,7 +85,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     platform : Geometry or platform file; default the sidecar's platform, else the prototype.
     fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
     settings : :class:`IdentificationSettings`.
-    estimator : an :class:`Estimator`, default the one ``settings.estimator`` names.
+    estimator : an :class:`Estimator`, default the one ``settings.fit.estimator`` names.
     experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
     mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
     keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
@@ -133,7 +133,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     except (UnidentifiableError, ImplausibleError) as exc:
         loaded = [load(x) for x in items]
         # the diagnosis compares values and residuals only: the classic covariance is enough
-        lenient = dataclasses.replace(settings, plausibility=False, uncertainty="classic")
+        lenient = settings.replace(plausibility=False, uncertainty="classic")
 
         def refit(flipped: Sequence[Any], checked: IdentificationSettings = lenient) -> Identification:
             return _identify_stream(_LogStream(flipped), geometry, fixed, checked, estimator, True)
@@ -143,7 +143,7 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
             raise pick_sign_candidate(loaded, candidates, refit) from None
         if isinstance(exc, UnidentifiableError):
             raise
-        unchecked = refit(loaded, dataclasses.replace(lenient, max_relative_std=math.inf))
+        unchecked = refit(loaded, lenient.replace(max_relative_std=math.inf))
         cause, detail = diagnose_signs(loaded, refit, overall_rms(unchecked))
         raise ImplausibleError(exc.implausible, cause, detail) from None
 
@@ -196,7 +196,8 @@ def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: Identificati
         if reuse:  # the blocks are dropped once reduced: the next log of this thread reuses the buffers
             space = local.__dict__.setdefault("workspace", Workspace())
         rows = log_rows(log, geometry, settings, core, space)
-        reduction = reduce_blocks(rows.blocks, width, offsets=settings.torque_offsets, columns=order, workspace=space)
+        reduction = reduce_blocks(rows.blocks, width, offsets=settings.fit.torque_offsets, columns=order,
+                                  workspace=space)
         if reuse:
             rows = dataclasses.replace(rows, blocks=())
         return log, core, rows, reduction
@@ -209,7 +210,7 @@ def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, f
                      workers: int = 1) -> Identification:
     """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one regression."""
     fixed = check_fixed(fixed)
-    _, _, idx_free, p_fixed = columns(fixed, settings.torque_offsets)
+    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
     order = np.array(list(idx_free) + [i for i in range(len(p_fixed)) if i not in idx_free])  # free columns first
     stats, store, names = RowStatistics(len(p_fixed), columns=order), RowStore(columns=order), {}
     blocks: list[EquationBlock] = []
@@ -245,7 +246,8 @@ def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, f
         if not stats.n_rows:
             raise ValueError(
                 "no usable rows: the logs contain no samples in a motion mode of the model "
-                f"(segments used: {', '.join(settings.segments) if settings.segments else 'all'}; rows: {counts.to_dict()})")
+                f"(segments used: {', '.join(settings.rows.segments) if settings.rows.segments else 'all'}; "
+                f"rows: {counts.to_dict()})")
         data = regression_data(stats, names, idx_free, p_fixed, store)
         return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
                               sources=sources, notes=notes, n_samples=n_samples, rows=counts, slip_events=events,
@@ -264,10 +266,10 @@ def _pieces_of(item: Any):
 
 
 def _check_segments_present(present: set[str], settings: IdentificationSettings) -> None:
-    """``settings.segments`` must name labels some log carries; else an error listing the ones present."""
-    if settings.segments is None:
+    """``settings.rows.segments`` must name labels some log carries; else an error listing the ones present."""
+    if settings.rows.segments is None:
         return
-    missing = [s for s in settings.segments if s not in present]
+    missing = [s for s in settings.rows.segments if s not in present]
     if missing:
         raise ValueError(f"segments {missing} are not in the logs: the logs carry the labels "
                          f"{sorted(present) or 'none (no segment column)'}")

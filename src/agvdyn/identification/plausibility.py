@@ -89,11 +89,11 @@ def encoder_sign_candidates(logs: Sequence[Any], geometry: Any, settings: Any) -
     out = []
     for log in logs:
         given = median_slip(log)
-        if not given > settings.slip_floor:
+        if not given > settings.rows.slip_floor:
             continue
         for what, columns in ENCODER_HYPOTHESES:
             fixed = median_slip(_flipped(log, columns))
-            if fixed < 0.2 * given and fixed < settings.slip_floor:
+            if fixed < 0.2 * given and fixed < settings.rows.slip_floor:
                 out.append((what, columns, f"{getattr(log, 'path', None) or '<log>'}: the wheels slip by {given:.3g} m/s "
                                            f"(median of the moving rows) as the encoders are given, and roll "
                                            f"({fixed:.2g} m/s) with {', '.join(columns)} negated"))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,63 @@ from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.slip import SlipEvent
 from agvdyn.platform import PARAMETER_NAMES, PARAMETER_UNITS, Geometry, ParameterFile, Parameters, write_parameters
 
-__all__ = ["Identification"]
+__all__ = ["Identification", "UncertaintySummary", "ParameterCorrelation"]
+
+#: The keys of the uncertainty's details (:func:`agvdyn.identification.uncertainty.parameter_uncertainty`)
+#: in the order of the JSON ``uncertainty`` entry; each method has some of them.
+_DETAIL_KEYS = ("sigma2", "bandwidth_steps", "correlation_time_steps", "recordings", "blocks", "replicates",
+                "block_steps", "max_block_leverage", "blocks_above_half_leverage", "seed")
+
+
+@dataclass(frozen=True)
+class UncertaintySummary:
+    """How the std were computed (the JSON ``uncertainty`` entry): ``method`` (``classic``, ``hac``,
+    ``jackknife``, ``bootstrap``), the details that method has (None where it has none: ``sigma2``
+    for classic; bandwidth, correlation time and recordings for the others; blocks and leverage for
+    the jackknife; replicates and seed for the bootstrap) and ``dof``, the degrees of freedom per
+    parameter (jackknife; None: infinite) or None."""
+
+    method: str
+    sigma2: float | None = None
+    bandwidth_steps: int | None = None
+    correlation_time_steps: float | None = None
+    recordings: int | None = None
+    blocks: int | None = None
+    replicates: int | None = None
+    block_steps: int | None = None
+    max_block_leverage: float | None = None
+    blocks_above_half_leverage: int | None = None
+    seed: int | None = None
+    dof: Mapping[str, float | None] | None = None
+
+    @classmethod
+    def of(cls, method: str, details: Mapping[str, Any], dof: Mapping[str, float | None] | None = None
+           ) -> "UncertaintySummary":
+        """From an :class:`~agvdyn.identification.uncertainty.Uncertainty`'s method and details."""
+        unknown = sorted(set(details) - set(_DETAIL_KEYS))
+        if unknown:
+            raise ValueError(f"uncertainty details {unknown}: expected some of {list(_DETAIL_KEYS)}")
+        return cls(method, **details, dof=None if dof is None else dict(dof))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON entry: ``method``, the details present, ``dof`` when there is one."""
+        out: dict[str, Any] = {"method": self.method}
+        out.update({k: getattr(self, k) for k in _DETAIL_KEYS if getattr(self, k) is not None})
+        if self.dof is not None:
+            out["dof"] = dict(self.dof)
+        return out
+
+
+@dataclass(frozen=True)
+class ParameterCorrelation:
+    """Correlation matrix of the estimated parameters (offsets left out), rounded to 6 decimals:
+    ``matrix[i][j]`` between ``names[i]`` and ``names[j]`` (the JSON ``correlation`` entry)."""
+
+    names: tuple[str, ...]
+    matrix: tuple[tuple[float, ...], ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"names": list(self.names), "matrix": [list(row) for row in self.matrix]}
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,7 +93,7 @@ class Identification:
         clipped at the stops); ``slip_events``: wheel slip found (:class:`SlipEvent`);
         ``slip_thresholds``: threshold used per log (m/s).
     offsets, offsets_std : estimated motor-torque offsets (motor side, N m) when
-        ``settings.torque_offsets``; the model torques of Fig. 5 include them.
+        ``settings.fit.torque_offsets``; the model torques of Fig. 5 include them.
         ``condition_number_with_offsets``: cond of the scaled regressor with the offset columns.
     """
 
@@ -62,8 +119,8 @@ class Identification:
     slip_thresholds: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     std_classic: dict[str, float] = field(default_factory=dict)
-    correlation: dict[str, Any] = field(default_factory=dict)
-    uncertainty: dict[str, Any] = field(default_factory=dict)
+    correlation: ParameterCorrelation | None = None
+    uncertainty: UncertaintySummary | None = None
     active_bounds: tuple[str, ...] = ()
     downweighted_rows: int = 0
     quantiles: dict[str, float] = field(default_factory=dict)  # of ci95 per parameter; default 1.96
@@ -137,8 +194,8 @@ class Identification:
     def _data_account(self) -> dict[str, Any]:
         return {
             "estimator": self.estimator,
-            "uncertainty": dict(self.uncertainty),
-            "correlation": dict(self.correlation),
+            "uncertainty": {} if self.uncertainty is None else self.uncertainty.to_dict(),
+            "correlation": {} if self.correlation is None else self.correlation.to_dict(),
             "active_bounds": list(self.active_bounds),
             "downweighted_rows": self.downweighted_rows,
             "rows": self.rows.to_dict(),
@@ -164,7 +221,7 @@ class Identification:
             "torque_offsets": {n: {"value": v, "std": self.offsets_std.get(n)} for n, v in self.offsets.items()},
             "n_rows": self.n_rows,
             "n_samples": self.n_samples,
-            "filtering": self.settings.filtering.value,
+            "filtering": self.settings.rows.filtering.value,
             "sources": list(self.sources),
             "notes": list(self.notes),
             "warnings": list(self.warnings),

@@ -34,16 +34,16 @@ from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering
 from agvdyn.kinematics.models import _constant_model
 from agvdyn.platform import Geometry
+from agvdyn.row_rules import RowSettings
+from agvdyn.segments_vocabulary import label_modes
 from agvdyn.signals import row_max_abs
 
 __all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_equations", "labels_present"]
 
-#: Motion mode of the rows each segment label names (PLATFORM.md); only for counting disagreements.
-LABEL_MODES: dict[str, tuple[Mode, ...]] = {
-    "steer_left": (Mode.PARKING,), "steer_right": (Mode.PARKING,), "align": (Mode.PARKING,),
-    "straight": (Mode.STRAIGHT,), "rotation": (Mode.ROTATION,), "lateral": (Mode.LATERAL,),
-    "lane_change": (Mode.CAR_LIKE, Mode.STRAIGHT),
-}
+#: Motion modes of the rows each segment label names (:mod:`agvdyn.segments_vocabulary`); only for
+#: counting disagreements.
+LABEL_MODES: dict[str, tuple[Mode, ...]] = {name: tuple(Mode.from_label(m) for m in modes)
+                                             for name, modes in label_modes().items()}
 NO_MODE = 0
 
 
@@ -127,18 +127,19 @@ def _mode_tables(geometry: Geometry, thresholds: tuple[tuple[str, float], ...]) 
 
 
 @functools.lru_cache(maxsize=32)
-def _guard_samples(guards: tuple[tuple[str, float], ...], cutoff: float, dt: float) -> np.ndarray:
-    """(6, 2) stiction guard in samples of each mode's coordinate slots (read-only)."""
-    seconds = {c: multiple / cutoff for c, multiple in guards}
+def _guard_samples(rules: RowSettings, dt: float) -> np.ndarray:
+    """(6, 2) stiction guard in samples of each mode's coordinate slots (read-only;
+    :meth:`~agvdyn.row_rules.RowSettings.guard_samples`, as the planner's)."""
+    guards = rules.guards()
     out = np.zeros((6, 2), dtype=np.int64)
     for m in Mode:
-        out[m, :m.dof] = [int(round(seconds[c] / dt)) for c in m.coordinates]
+        out[m, :m.dof] = [rules.guard_samples(guards[c], dt) for c in m.coordinates]
     out.flags.writeable = False
     return out
 
 
 def _tables(geometry: Geometry, settings: IdentificationSettings) -> _ModeTables:
-    return _mode_tables(geometry, tuple(sorted(settings.thresholds().items())))
+    return _mode_tables(geometry, tuple(sorted(settings.rows.thresholds().items())))
 
 
 def _modes_and_virtual_angle(geometry: Geometry, st: Stretch, settings: IdentificationSettings
@@ -146,8 +147,8 @@ def _modes_and_virtual_angle(geometry: Geometry, st: Stretch, settings: Identifi
     tables = _tables(geometry, settings)
     mode, av = np.empty(st.n, dtype=np.int8), np.zeros(st.n)
     stretch_modes(st.alpha, st.trig, st.q_dot, geometry.b / geometry.l, max_virtual_angle(geometry),
-                  float(settings.mode_tolerance), tables.nominal, tables.h1, geometry.r, float(settings.rest_speed),
-                  float(settings.steering_rest_rate), mode, av)
+                  float(settings.rows.mode_tolerance), tables.nominal, tables.h1, geometry.r,
+                  float(settings.rows.rest_speed), float(settings.rows.steering_rest_rate), mode, av)
     return mode, av
 
 
@@ -225,7 +226,7 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there). The rows of all
     runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views."""
-    guards = _guard_samples(tuple(sorted(settings.guards().items())), float(settings.filter.cutoff), float(st.dt))
+    guards = _guard_samples(settings.rows, float(st.dt))
     tables = _tables(geometry, settings)
     n = st.n
     Y, tau = empty(workspace, f"Y{tag}", (n, 2, 11)), empty(workspace, f"tau{tag}", (n, 2))
@@ -295,17 +296,18 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     peaks = [row_max_abs(st.slip) for st, _ in stretches]
     speeds = np.concatenate([p[(m != NO_MODE) & ~st.edge] for p, (st, _, m) in zip(peaks, in_mode)] or [np.zeros(0)])
     threshold = slip_threshold(speeds, settings)
-    slip_guard = settings.slip_guard
+    slip_guard = settings.rows.slip_guard
     blocks, events = [], []
     for k, (st, av, mode) in enumerate(in_mode):
         drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)), peaks[k])
         if core is not None:  # an event belongs to the piece where it starts
             ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
         events += ev
-        if settings.segments is None:
+        if settings.rows.segments is None:
             selected = np.ones(st.n, dtype=bool)
         else:
-            selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(settings.segments, st.rows)
+            wanted = settings.rows.segments
+            selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(wanted, st.rows)
         in_a_mode = mode != NO_MODE
         mine = own[st.rows]  # the guards see the neighbours' rows; only the piece's own are used and counted
         counts.edge += int(np.count_nonzero(st.edge & mine))

@@ -60,13 +60,13 @@ def slip_threshold(speed: np.ndarray, settings: IdentificationSettings) -> float
     ``median + slip_spread * 1.4826 * MAD`` of ``speed`` (the rows in a motion mode), at least
     ``slip_floor``: a few short slip events do not move median and MAD, so they stand out.
     """
-    if settings.slip_threshold is not None:
-        return float(settings.slip_threshold)
+    if settings.rows.slip_threshold is not None:
+        return float(settings.rows.slip_threshold)
     if speed.size == 0:
-        return float(settings.slip_floor)
+        return float(settings.rows.slip_floor)
     med, mad = median_and_mad(np.ascontiguousarray(speed, dtype=float))
     mad = MAD_SCALE * float(mad)
-    return max(float(med) + settings.slip_spread * mad, float(settings.slip_floor))
+    return max(float(med) + settings.rows.slip_spread * mad, float(settings.rows.slip_floor))
 
 
 def slip_rows(source: str, t: np.ndarray, slip: np.ndarray, threshold: float, guard_rows: int,

@@ -95,10 +95,10 @@ class Stretch:
 
 
 def torque_lead(log: Any, settings: IdentificationSettings) -> float:
-    """Samples by which a log's torques lead its angles: ``settings.torque_lead``, else the sidecar's
+    """Samples by which a log's torques lead its angles: ``settings.rows.torque_lead``, else the sidecar's
     ``torque_lead`` (``agvdyn.simulation`` writes 0.5), else 0."""
-    if settings.torque_lead is not None:
-        return float(settings.torque_lead)
+    if settings.rows.torque_lead is not None:
+        return float(settings.rows.torque_lead)
     from agvdyn.io.log import sidecar_value
 
     value = sidecar_value(log, "torque_lead")
@@ -124,12 +124,12 @@ def align_torque(torque: np.ndarray, lead: float) -> np.ndarray:
 
 def edge_rows(settings: IdentificationSettings, dt: float) -> int:
     """Rows dropped at each end of a stretch: the filter's transient."""
-    return int(math.ceil(settings.seconds(settings.edge_guard) / dt))
+    return int(math.ceil(settings.rows.seconds(settings.rows.edge_guard) / dt))
 
 
 def min_stretch_rows(settings: IdentificationSettings, dt: float) -> int:
     """Fewest rows a stretch needs: more than the filter's padding and both edges."""
-    return max(settings.filter.padlen(dt), 2 * edge_rows(settings, dt)) + 1
+    return max(settings.rows.filter.padlen(dt), 2 * edge_rows(settings, dt)) + 1
 
 
 def stretch_bounds(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: IdentificationSettings
@@ -147,8 +147,9 @@ def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: I
         return [(0, t.size)], [], math.nan
     nominal = stamp_interval(t, source="column 't'") if nominal is None else float(nominal)
     kind = np.empty(t.size - 1, dtype=np.int8)
-    found = recording_breaks(t, alpha, beta, settings.stretch_gap * nominal, settings.steering_jump_rate * nominal,
-                             settings.wheel_jump_rate * nominal, kind)
+    rules = settings.rows
+    found = recording_breaks(t, alpha, beta, rules.stretch_gap * nominal, rules.steering_jump_rate * nominal,
+                             rules.wheel_jump_rate * nominal, kind)
     cuts = np.flatnonzero(kind) if found else np.zeros(0, dtype=np.int64)
     reasons = []
     for i in cuts:
@@ -163,7 +164,8 @@ def stretches_of(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, settings: I
 def slip_filter(settings: IdentificationSettings, dt: float) -> FilterSettings:
     """Low-pass of the steering angles whose rates enter the slip speed: ``slip_cutoff``, at most
     0.8 x the Nyquist frequency of ``dt``, the regression filter's order."""
-    return FilterSettings(cutoff=min(settings.slip_cutoff, 0.8 * math.pi / dt), order=settings.filter.order)
+    rules = settings.rows
+    return FilterSettings(cutoff=min(rules.slip_cutoff, 0.8 * math.pi / dt), order=rules.filter.order)
 
 
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
@@ -186,9 +188,9 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     sl = slice(start, stop)
     t = np.asarray(log.t[sl], dtype=float)
     where = f"{source}: rows {start}..{stop - 1} (t = {t[0]:.6g}..{t[-1]:.6g} s)"
-    dt = uniform_sample_time(t, rtol=settings.sample_jitter, source=f"{where}: column 't'", median=median_step)
+    dt = uniform_sample_time(t, rtol=settings.rows.sample_jitter, source=f"{where}: column 't'", median=median_step)
     n = t.size
-    sos, zi, pad = filter_design(dt, settings.filter)
+    sos, zi, pad = filter_design(dt, settings.rows.filter)
     if n <= pad:
         raise ValueError(f"{where}: signal of {n} samples is too short for the zero-phase filter: needs more than {pad}")
     angles = empty(workspace, f"angles{tag}", (n + 2 * pad, 6))
@@ -207,13 +209,13 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     torque = np.asarray(log.torque[sl], dtype=float)  # a view of the log's columns: the kernel reads it strided
     wheels = empty(workspace, f"wheels{tag}", (n, 4))  # raw: the slip's wheel rates (encoders resolve 1e-4 rad)
     copy_rows(wheels, log.beta[sl])
-    stretch_motion(f, fast, wheels, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.epsilon),
+    stretch_motion(f, fast, wheels, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.rows.epsilon),
                    torque, torque_lead(log, settings), alpha, trig, q_dot, slip, middle,
                    empty(workspace, f"tanh{tag}", (n, 6)))
-    if settings.filtering is Filtering.PARALLEL:
+    if settings.rows.filtering is Filtering.PARALLEL:
         filtfilt_in_place(sos, zi, both, pad)
     else:
-        middle[:, 21:] = lowpass(middle[:, 21:], dt, settings.filter)
+        middle[:, 21:] = lowpass(middle[:, 21:], dt, settings.rows.filter)
     k = edge_rows(settings, dt)
     edge = np.zeros(n, dtype=bool)
     edge[:k] = True

@@ -34,7 +34,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import Any
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
@@ -46,17 +45,9 @@ from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.correlation import correlation_time
 from agvdyn.identification.estimators import Estimator
 from agvdyn.identification.normal import RecordingRows, RegressionData, RowIndex
+from agvdyn.identification.stage_settings import UncertaintyMethod
 
 __all__ = ["UncertaintyMethod", "Uncertainty", "RowIndex", "parameter_uncertainty", "correlation_time"]
-
-
-class UncertaintyMethod(str, Enum):
-    """``identify --uncertainty``."""
-
-    CLASSIC = "classic"
-    HAC = "hac"
-    JACKKNIFE = "jackknife"
-    BOOTSTRAP = "bootstrap"
 
 
 @dataclass(frozen=True, eq=False)

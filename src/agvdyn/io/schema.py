@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 from agvdyn._lazy import pandas as pd
+from agvdyn.segments_vocabulary import SEGMENTS  # noqa: F401  (the known segment names, re-exported)
 from agvdyn.time_base import stamp_interval
 
 
@@ -24,9 +25,8 @@ BETA_COLUMNS = ("beta_fl", "beta_rl", "beta_fr", "beta_rr")
 TORQUE_COLUMNS = ("m_fl", "m_rl", "m_fr", "m_rr")
 #: Name of the optional column naming the experiment phase of each row.
 SEGMENT_COLUMN = "segment"
-#: Known segment names: the identification sequence of sec. 6.2, the validation manoeuvres of
-#: sec. 7, and ``align`` for wheel alignment at rest between segments (mode 1).
-SEGMENTS = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align", "lifted_wheel")
+# Known segment names: SEGMENTS, imported above from agvdyn.segments_vocabulary (in the order of the
+# codes of the ``segment`` column).
 #: Mechanical range of the steering angles (PLATFORM.md), rad.
 STEERING_LIMIT = math.pi / 2
 #: Default tolerance beyond the stops, rad: measured steering angles pass +-pi/2 by their noise

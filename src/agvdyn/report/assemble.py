@@ -32,6 +32,7 @@ from agvdyn.identification.stretches import stretch_bounds
 from agvdyn.io.log import sidecar_path
 from agvdyn.platform import PARAMETER_UNITS, Geometry
 from agvdyn.preflight import Preflight, preflight
+from agvdyn.report.model import ReportContents, contents_of
 from agvdyn.report.plan import ExcitationPlan, PlanFile, excitation_plan
 from agvdyn.report.reference import Reference, choose_reference, parameter_table
 
@@ -122,7 +123,9 @@ class Provenance:
 
 @dataclass(frozen=True, eq=False)
 class Report:
-    """Everything the HTML report shows (:func:`agvdyn.report.report_html`)."""
+    """Everything the HTML report shows (:func:`agvdyn.report.report_html`): the results, and
+    ``contents``, the numbers and figure inputs of every section computed from them when the report
+    is built (:func:`agvdyn.report.model.contents_of`)."""
 
     verdict: Verdict
     provenance: Provenance
@@ -136,11 +139,16 @@ class Report:
     title: str = "agvdyn identification report"
     plan: ExcitationPlan | None = None
     plan_notes: tuple[str, ...] = ()
+    contents: ReportContents | None = None
+
+    def __post_init__(self) -> None:
+        if self.contents is None:  # every number and figure input, computed once here
+            object.__setattr__(self, "contents", contents_of(self))
 
     @property
     def parameter_table(self):
-        """:func:`parameter_table` against the report's reference (None: no comparison)."""
-        return None if self.identification is None else parameter_table(self.identification, self.reference)
+        """:func:`parameter_table` against the report's reference (None: no identification)."""
+        return self.contents.parameter_table
 
     def to_json_dict(self) -> dict[str, Any]:
         """What ``agvdyn report --json`` prints."""

@@ -1,28 +1,26 @@
 """The report as one self-contained HTML file: verdict, data quality, parameters, correlation,
 residuals, Fig. 5, Fig. 6 and provenance. Figures are embedded as base64 PNG; no script, no
-external file. Written atomically (``agvdyn._files.write_text_atomically``)."""
+external file. Written atomically (``agvdyn._files.write_text_atomically``).
+
+The renderer only formats: every number and figure input is in ``report.contents``
+(:mod:`agvdyn.report.model`, computed when the report was assembled)."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from agvdyn import plots
 from agvdyn._files import write_text_atomically
-from agvdyn.platform import PAPER_CONDITION_NUMBER, PARAMETER_NAMES, PARAMETER_UNITS
+from agvdyn.platform import PAPER_CONDITION_NUMBER
 from agvdyn.report._format import count, esc, figure_png, nbytes, num, percent, plain, table, unit, value_std_ci
 from agvdyn.report._format import img as _img
 from agvdyn.report._format import yes_no
 from agvdyn.report.assemble import Outcome, Report, report_of
-from agvdyn.report.plan import plan_html
+from agvdyn.report.plan_section import plan_html
 from agvdyn.report.reference import Reference
 
 __all__ = ["figure_png", "report_html", "write_report"]
-
-_UNITS = {"alpha_l": "N m", "alpha_r": "N m", "alpha_v": "N m", "gamma_ch": "N m", "x_ch": "N", "y_ch": "N"}
-
 
 _CSS = """
 :root { --ok: #1b7f3b; --warn: #a36100; --bad: #b3261e; --line: #d8dce0; --muted: #5b6670; }
@@ -67,7 +65,7 @@ _SECTIONS = (("verdict", "Verdict"), ("data-quality", "Data quality"), ("plan", 
 
 
 def _verdict(report: Report) -> str:
-    v = report.verdict
+    v, facts_ = report.verdict, report.contents.facts
     cls = {Outcome.IDENTIFIED: "identified", Outcome.WARNINGS: "warnings", Outcome.REFUSED: "refused"}[v.outcome]
     parts = [f'<section id="verdict" class="verdict {cls}"><div class="label">{esc(v.outcome.value.capitalize())}'
              f"</div><p>{esc(v.summary)}</p>"]
@@ -77,223 +75,178 @@ def _verdict(report: Report) -> str:
     if report.refusal is not None:
         parts.append(f"<details><summary>Full message</summary><pre>{esc(report.refusal)}</pre></details>")
     facts = []
-    ident = report.identification
-    if ident is not None:
-        facts.append(f"cond(&Theta;<sub>1,w</sub><sup>T</sup>&Theta;<sub>1,w</sub>) <b>{num(ident.condition_number, 3)}</b>")
-    if report.validation is not None:
-        worst = max((x for x in report.validation.nrmse_moving.values() if x == x), default=float("nan"))
-        facts.append(f"validation NRMSE without stiction rows &le; <b>{num(worst, 2)}</b>")
-    facts.append(f"reference <b>{esc(report.reference.label) if report.reference else 'none'}</b>")
-    facts.append(f"platform <b>{esc(report.geometry.name)}</b>")
+    if facts_.cond is not None:
+        facts.append(f"cond(&Theta;<sub>1,w</sub><sup>T</sup>&Theta;<sub>1,w</sub>) <b>{num(facts_.cond, 3)}</b>")
+    if facts_.worst_nrmse is not None:
+        facts.append(f"validation NRMSE without stiction rows &le; <b>{num(facts_.worst_nrmse, 2)}</b>")
+    facts.append(f"reference <b>{esc(facts_.reference) if facts_.reference else 'none'}</b>")
+    facts.append(f"platform <b>{esc(facts_.platform)}</b>")
     parts.append('<div class="facts">' + "".join(f"<span>{f}</span>" for f in facts) + "</div></section>")
     return "".join(parts)
 
 
-def _per_mode(rows_list) -> str:
-    samples: dict[str, int] = {}
-    equations: dict[str, int] = {}
-    kept: dict[str, int] = {}
-    coords: dict[str, tuple[str, ...]] = {}
-    for rows in rows_list:
-        for k, v in rows.counts.per_mode.items():
-            samples[k] = samples.get(k, 0) + v
-        for b in rows.blocks:
-            label = b.mode.label
-            kept[label] = kept.get(label, 0) + int(b.keep.sum())
-            coords[label] = b.coordinates
-    for label, n in samples.items():
-        equations[label] = n * len(coords.get(label, ()))
-    order = [m for m in ("1", "2", "2s", "3", "4") if m in samples]
-    body = [[esc(plots.mode_name(m)), count(samples[m]), esc(", ".join(coords.get(m, ()))), count(equations[m]),
-             count(kept.get(m, 0)), count(equations[m] - kept.get(m, 0)),
-             percent(100 * kept.get(m, 0) / equations[m] if equations[m] else float("nan"), 3)] for m in order]
+def _per_mode(modes) -> str:
+    body = [[esc(plots.mode_name(m.label)), count(m.samples), esc(", ".join(m.coordinates)), count(m.equations),
+             count(m.kept), count(m.equations - m.kept), percent(m.kept_pct, 3)] for m in modes]
     return table(["mode", "samples used", "generalized coordinates", "equation rows", "kept for the fit",
                   "left out: stiction and its guard", "kept"], body, align="lrl")
 
 
 def _quality(report: Report) -> str:
-    checked = report.preflight
+    q = report.contents.quality
     parts = ['<section id="data-quality"><h2>Data quality</h2>']
-    if checked is None:
+    if q is None:
         return parts[0] + '<p class="note">No pre-flight check (results computed elsewhere).</p></section>'
-    body = []
-    for k, f in enumerate(checked.files):
-        s, c = f.summary, f.rows.counts
-        cuts = report.cuts[k] if k < len(report.cuts) else ()
-        body.append([f"<code>{esc(s.path or '<log>')}</code>", count(s.n_samples), f"{num(s.duration, 4)}&nbsp;s",
-                     f"{num(s.rate, 4, trim=True)}&nbsp;Hz", count(len(cuts)), count(len(s.segments)),
-                     count(sum(c.clipped_stop.values())), count(len(f.rows.slip_events)), count(c.used),
-                     percent(100 * c.used / c.samples if c.samples else float("nan"), 3)])
+    body = [[f"<code>{esc(f.path)}</code>", count(f.samples), f"{num(f.duration, 4)}&nbsp;s",
+             f"{num(f.rate, 4, trim=True)}&nbsp;Hz", count(f.cuts), count(f.labelled_runs), count(f.clipped),
+             count(f.slip_events), count(f.used), percent(f.used_pct, 3)] for f in q.files]
     parts.append(table(["file", "samples", "duration", "rate", "cuts (dropouts)", "labelled runs",
                         "clipped at the stops", "slip events", "samples used", "used"], body))
-    parts.append(_img(plots.quality_figure(checked.files, report.cuts),
+    parts.append(_img(plots.quality_figure(q.timeline),
                       "Per file: segment labels (coloured by the mode they name), the motion mode of each row from "
                       "its configuration, rows kept for the regression, wheel slip, cuts between recordings."))
     parts.append("<h3>Rows kept per motion mode</h3>")
-    parts.append(_per_mode([f.rows for f in checked.files]))
+    parts.append(_per_mode(q.modes))
     parts.append("<h3>Samples left out, and why</h3>")
-    body = []
-    for f in checked.files:
-        c = f.rows.counts
-        body.append([f"<code>{esc(f.summary.path or '<log>')}</code>", count(c.samples), count(c.edge),
-                     count(c.slip), count(c.no_mode), count(c.not_selected), count(c.too_short), count(c.used)])
+    body = [[f"<code>{esc(f.path)}</code>", count(f.counted), count(f.edge), count(f.slip), count(f.no_mode),
+             count(f.not_selected), count(f.too_short), count(f.used)] for f in q.files]
     parts.append(table(["file", "samples", "filter edges", "wheel slip", "in no motion mode", "not selected (--segments)",
                         "stretch too short", "used"], body))
-    st = report.provenance.settings
-    edge_ms = 1000 * st.get("edge_guard", float("nan")) / st.get("filter_cutoff_rad_s", float("nan"))
-    parts.append(f'<p class="note">Filter edges: the first and last {num(edge_ms, 3)}&nbsp;ms of '
+    parts.append(f'<p class="note">Filter edges: the first and last {num(q.edge_ms, 3)}&nbsp;ms of '
                  "each continuous recording (zero-phase filter transients). In no motion mode: the "
                  "chassis moves with steering angles of no mode of eq. (9), or steers while moving laterally or "
                  "rotating. Stiction rows are left out per generalized coordinate (table above). Rows clipped at "
                  "the steering stops are kept (their angle is set to the stop).</p>")
-    mismatch = {}
-    for f in checked.files:
-        for k, v in f.rows.counts.label_mismatch.items():
-            mismatch[k] = mismatch.get(k, 0) + v
-    if mismatch:
+    if q.mismatch:
         parts.append("<h3>Labels next to the detected modes</h3>")
         parts.append(table(["label", "rows in another mode than the label names"],
-                           [[esc(k), count(v)] for k, v in mismatch.items()]))
+                           [[esc(k), count(v)] for k, v in q.mismatch]))
         parts.append('<p class="note">Labels are hints: every row\'s mode comes from its configuration, so a label '
                      "that also covers the wheel alignment before an experiment, or lags, is counted here and does "
                      "not change the parameters.</p>")
-    events = [e for f in checked.files for e in f.rows.slip_events]
     parts.append("<h3>Wheel slip</h3>")
-    if events:
+    if q.slip:
         parts.append(table(["file", "start", "end", "duration", "peak slip speed", "wheels", "samples"],
                            [[f"<code>{esc(e.source)}</code>", f"{num(e.t_start, decimals=3)}&nbsp;s",
-                             f"{num(e.t_end, decimals=3)}&nbsp;s",
-                             f"{num(1000 * (e.t_end - e.t_start), 3)}&nbsp;ms", f"{num(e.peak_mps, 3)}&nbsp;m/s",
-                             esc(", ".join(e.wheels)), count(e.rows)] for e in events], align="lrrrrl"))
+                             f"{num(e.t_end, decimals=3)}&nbsp;s", f"{num(e.duration_ms, 3)}&nbsp;ms",
+                             f"{num(e.peak_mps, 3)}&nbsp;m/s", esc(", ".join(e.wheels)), count(e.rows)]
+                            for e in q.slip], align="lrrrrl"))
     else:
-        thresholds = ", ".join(f"{num(f.rows.slip_threshold, 3, trim=True)}&nbsp;m/s" for f in checked.files)
+        thresholds = ", ".join(f"{num(x, 3, trim=True)}&nbsp;m/s" for x in q.slip_thresholds)
         parts.append(f"<p>No wheel slip found (threshold on the rolling-constraint residual: {thresholds}).</p>")
     parts.append("<h3>Excitation of each parameter by the rows kept</h3>")
     parts.append(table(["parameter", "status", "variance inflation", "relative std", "excited by"],
                        [[esc(e.name), esc(e.status), num(e.inflation, 3), percent(100 * e.relative_std, 2),
-                         esc(e.excited_by)] for e in checked.excitation], align="llrrl",
-                       row_classes=["bad" if e.status in ("weak", "not excited") else "" for e in checked.excitation]))
-    notes = [f"{f.summary.path or '<log>'}: {g}" for f in checked.files for g in f.gaps]
-    notes += list(checked.warnings) + (list(report.identification.notes) if report.identification else [])
-    notes = list(dict.fromkeys(notes))  # the identification notes its cuts too
-    if notes:
-        parts.append("<h3>Notes</h3><ul>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>")
+                         esc(e.excited_by)] for e in q.excitation], align="llrrl",
+                       row_classes=["bad" if e.status in ("weak", "not excited") else "" for e in q.excitation]))
+    if q.notes:
+        parts.append("<h3>Notes</h3><ul>" + "".join(f"<li>{esc(n)}</li>" for n in q.notes) + "</ul>")
     parts.append("</section>")
     return "".join(parts)
 
 
+_METHODS = {"hac": "heteroscedasticity- and autocorrelation-consistent (Bartlett) covariance",
+            "classic": "classic covariance of eq. (25)", "bootstrap": "block bootstrap",
+            "jackknife": "delete-one-block jackknife"}
+
+
 def _parameters(report: Report) -> str:
-    ident = report.identification
+    sec = report.contents.parameters
     parts = ['<section id="parameters"><h2>Parameters</h2>']
-    if ident is None:
+    if sec is None:
         return parts[0] + "<p>None: the identification was refused (see the verdict).</p></section>"
-    ref = report.reference
-    frame = report.parameter_table
+    compared = sec.reference_label is not None
     header = ["parameter", "value", "std", "95&nbsp;% interval", "unit", "estimated or fixed"]
-    if ref is not None:
-        header += [f"reference<br><span class=note>{esc(ref.label)}</span>", "deviation", "|deviation| / std",
-                   "within 5&nbsp;% or 3&nbsp;std"]
+    if compared:
+        header += [f"reference<br><span class=note>{esc(sec.reference_label)}</span>", "deviation",
+                   "|deviation| / std", "within 5&nbsp;% or 3&nbsp;std"]
     body, classes = [], []
-    for name in PARAMETER_NAMES:
-        row = frame.loc[name]
-        fixed = bool(row["fixed"])
-        std = None if fixed else row["std"]
-        ci = None if fixed else (row["ci_low"], row["ci_high"])
-        value, std_text, ci_text = value_std_ci(row["value"], std, ci)
-        if fixed:
-            value = num(row["value"], 5, trim=True)
-        cells = [esc(name), value, std_text, ci_text, unit(PARAMETER_UNITS[name]), "fixed" if fixed else "estimated"]
-        if ref is not None:
-            cells += [num(row["reference"], 5, trim=True),
-                      "&ndash;" if fixed else percent(row["deviation_pct"], 2, signed=True),
-                      num(row["deviation_in_std"], 2), yes_no(row["ok"])]
+    for row in sec.rows:
+        value, std_text, ci_text = value_std_ci(row.value, row.std, row.ci)
+        if row.fixed:
+            value = num(row.value, 5, trim=True)
+        cells = [esc(row.name), value, std_text, ci_text, unit(row.unit), "fixed" if row.fixed else "estimated"]
+        if compared:
+            cells += [num(row.reference, 5, trim=True),
+                      "&ndash;" if row.fixed else percent(row.deviation_pct, 2, signed=True),
+                      num(row.deviation_in_std, 2), yes_no(row.ok)]
         body.append(cells)
-        classes.append("fixed" if fixed else ("bad" if row["ok"] is False else ""))
+        classes.append("fixed" if row.fixed else ("bad" if row.ok is False else ""))
     parts.append('<div class="scroll">' + table(header, body, align="lrrrll", row_classes=classes) + "</div>")
-    unc = ident.uncertainty
-    method = {"hac": "heteroscedasticity- and autocorrelation-consistent (Bartlett) covariance",
-              "classic": "classic covariance of eq. (25)", "bootstrap": "block bootstrap",
-              "jackknife": "delete-one-block jackknife"}.get(unc.get("method"), "")
-    bw = unc.get("bandwidth_steps")
+    bw = sec.bandwidth
     parts.append(
-        f"<p>std: {esc(method)}{f', bandwidth {count(bw)} samples' if bw else ''}; 95&nbsp;% interval = value "
-        f"&plusmn; 1.96&nbsp;std. Estimator: {esc(ident.estimator)}. "
+        f"<p>std: {esc(_METHODS.get(sec.method, ''))}{f', bandwidth {count(bw)} samples' if bw else ''}; 95&nbsp;% "
+        f"interval = value &plusmn; 1.96&nbsp;std. Estimator: {esc(sec.estimator)}. "
         f"cond(&Theta;<sub>1,w</sub><sup>T</sup>&Theta;<sub>1,w</sub>) of the column-scaled stacked regressor "
-        f"(eq. 25) = <b>{num(ident.condition_number, 4)}</b> (paper: {PAPER_CONDITION_NUMBER}); unscaled: "
-        f"{num(ident.condition_number_unscaled, 3)}. {count(ident.n_rows)} equation rows from "
-        f"{count(ident.n_samples)} samples.</p>")
-    if ref is None:
+        f"(eq. 25) = <b>{num(sec.cond, 4)}</b> (paper: {PAPER_CONDITION_NUMBER}); unscaled: "
+        f"{num(sec.cond_unscaled, 3)}. {count(sec.n_rows)} equation rows from "
+        f"{count(sec.n_samples)} samples.</p>")
+    if not compared:
         parts.append('<p class="note">No comparison: no reference was given (<code>--reference FILE</code>), the '
                      "logs carry no simulator truth and the platform is not the paper's prototype, so Table 2 "
                      "does not apply.</p>")
-    if ident.offsets:
+    if sec.offsets:
         parts.append("<h3>Motor-torque offsets (nuisance parameters, motor side)</h3>")
         parts.append(table(["offset", "value", "std", "unit"],
-                           [[esc(n), *value_std_ci(v, ident.offsets_std.get(n), None)[:2], unit("N m")]
-                            for n, v in ident.offsets.items()], align="lrrl"))
-    if ref is not None:
-        parts.append(_img(plots.parameter_figure(ident, ref.parameters, ref.std, label=ref.label),
-                          f"Deviation of each estimate from the reference ({ref.label}), with +-3 std bars."))
+                           [[esc(n), *value_std_ci(v, sd, None)[:2], unit("N m")] for n, v, sd in sec.offsets],
+                           align="lrrl"))
+    if sec.deviations is not None:
+        parts.append(_img(plots.parameter_figure(sec.deviations),
+                          f"Deviation of each estimate from the reference ({sec.deviations.label}), with +-3 std bars."))
     parts.append("</section>")
     return "".join(parts)
 
 
 def _correlation(report: Report) -> str:
-    ident = report.identification
-    if ident is None or not ident.correlation.get("names"):
+    sec = report.contents.correlation
+    if sec is None:
         return ""
-    names = ident.correlation["names"]
-    r = np.array(ident.correlation["matrix"])
-    pairs = sorted(((abs(r[i, j]), names[i], names[j], r[i, j]) for i in range(len(names))
-                    for j in range(i + 1, len(names)) if abs(r[i, j]) >= 0.9), reverse=True)
     text = ("Strongly correlated (|r| &ge; 0.9): " + ", ".join(f"{esc(a)} and {esc(b)} ({num(v, 2, signed=True)})"
-                                                             for _, a, b, v in pairs) +
+                                                             for a, b, v in sec.pairs) +
             ". The data determine a combination of these better than each one; their std already include this."
-            if pairs else "No pair of estimates is correlated beyond |r| = 0.9.")
+            if sec.pairs else "No pair of estimates is correlated beyond |r| = 0.9.")
     return (f'<section id="correlation"><h2>Correlation of the estimates</h2><p>{text}</p>'
-            + _img(plots.correlation_figure(ident), "Correlation matrix of the estimated parameters.", "narrow")
+            + _img(plots.correlation_figure(sec.figure), "Correlation matrix of the estimated parameters.", "narrow")
             + "</section>")
 
 
 def _residuals(report: Report) -> str:
-    ident = report.identification
-    if ident is None:
+    sec = report.contents.residuals
+    if sec is None:
         return ""
-    rows = [[esc(k), num(v, 3, trim=True), unit(_UNITS.get(k.rpartition(":")[2], ""))] for k, v in ident.residual_rms.items()]
+    rows = [[esc(k), num(v, 3, trim=True), unit(u)] for k, v, u in sec.rms]
     return ('<section id="residuals"><h2>Residuals</h2><p>Residual = measured &minus; model generalized torque on '
             "the rows of the fit. White residuals stay inside the grey band of the autocorrelation; a slow decay "
             "means correlated errors, which the HAC standard deviations account for up to the marked bandwidth."
-            "</p>" + _img(plots.residual_figure(ident), "Residuals over time and their autocorrelation.")
+            "</p>" + _img(plots.residual_figure(sec.figure), "Residuals over time and their autocorrelation.")
             + "<h3>Residual RMS per segment and generalized coordinate</h3>"
             + table(["segment:coordinate", "RMS", "unit"], rows, align="lrl") + "</section>")
 
 
 def _fit(report: Report) -> str:
-    ident = report.identification
-    if ident is None:
+    fit = report.contents.fit
+    if fit is None:
         return ""
     return ('<section id="fit"><h2>Identification fit (cf. Fig. 5)</h2><p>Measured and model generalized torques '
             "of each segment. The model is drawn on the rows the fit uses; shaded: rows left out (stiction and "
             "its guard, filter edges, slip), where the tanh Coulomb term would switch with noise.</p>"
-            + _img(plots.identification_figure(ident), "Identification experiment: generalized torques.")
+            + _img(plots.identification_figure(fit), "Identification experiment: generalized torques.")
             + "</section>")
 
 
 def _validation(report: Report) -> str:
-    val = report.validation
-    if val is None:
+    sec = report.contents.validation
+    if sec is None:
         return ""
-    t = val.table
-    body = [[esc(k), num(r["nrmse"], decimals=3), num(r["nrmse_moving"], decimals=3), num(r["rms_error"], 3),
-             num(r["rms_measured"], 3), unit(_UNITS.get(str(k).rpartition(":")[2], "")), count(r["n_rows"]),
-             count(r["n_moving"])] for k, r in t.iterrows()]
-    return (f'<section id="validation"><h2>Validation on <code>{esc(val.source)}</code> (cf. Fig. 6)</h2>'
+    body = [[esc(k), num(nrmse, decimals=3), num(moving, decimals=3), num(err, 3), num(meas, 3), unit(u), count(n),
+             count(n_moving)] for k, nrmse, moving, err, meas, u, n, n_moving in sec.rows]
+    return (f'<section id="validation"><h2>Validation on <code>{esc(sec.source)}</code> (cf. Fig. 6)</h2>'
             "<p>NRMSE = RMS(measured &minus; model) / RMS(measured) per generalized coordinate: over all rows "
             "(as Fig. 6) and without the stiction rows. The prediction is drawn where the second is computed, "
             "with the stiction handling of the fit.</p>"
             + table(["coordinate", "NRMSE", "NRMSE without stiction", "RMS error", "RMS measured", "unit", "rows",
                      "rows moving"], body, align="lrrrrl")
-            + _img(plots.validation_figure(val), "Validation experiment: generalized torques.") + "</section>")
+            + _img(plots.validation_figure(sec.figure), "Validation experiment: generalized torques.") + "</section>")
 
 
 def _provenance(report: Report) -> str:
@@ -317,7 +270,7 @@ def _provenance(report: Report) -> str:
 def report_html(report: Report) -> str:
     """The report as an HTML string (figures embedded, no script)."""
     title = esc(report.title)
-    sections = [_quality(report), plan_html(report.plan, report.plan_notes, report.identification),
+    sections = [_quality(report), plan_html(report.contents.plan),
                 _parameters(report), _correlation(report), _residuals(report), _fit(report), _validation(report),
                 _provenance(report)]
     html_all = "".join(sections)

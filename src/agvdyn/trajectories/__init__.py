@@ -6,12 +6,13 @@ One module per job, data flowing one way::
 
     errors       TrajectoryError, LimitError
     fourier      FourierSeries: finite Fourier series starting and ending at rest
-    segments     Segment, Trajectory, alignment at rest, Fourier segments
-    limits       Limits, limit_report, check_limits, FloorSpace, floor_space
-    experiments  default excitation, identification sequence, lane change, lateral, lifted wheel,
-                 experiment(name)
+    segments     Segment, Trajectory, alignment at rest, Fourier segments, FloorSpace and
+                 floor_space (the floor a trajectory occupies)
+    limits       Limits, limit_report, check_limits
+    experiments  default excitation, identification sequence, lane change, lateral, lifted wheel
     car_like     the car-like experiment: fast rotation and tight turns for B_w (identify --fix none)
     files        read_trajectory (CSV / YAML), write_trajectory (YAML)
+    catalog      experiment(name): a built-in experiment by name, or a trajectory file
     planner      plan(): optimal four-phase identification sequence in a floor rectangle
 
 Generalized coordinates per mode (PLATFORM.md): mode 1 ``(alpha_l, alpha_r)``, mode 2
@@ -35,7 +36,6 @@ from agvdyn.trajectories.experiments import (
     EXPERIMENTS,
     default_excitation,
     default_periods,
-    experiment,
     identification_sequence,
     lane_change,
     lateral_experiment,
@@ -43,6 +43,7 @@ from agvdyn.trajectories.experiments import (
 )
 from agvdyn.trajectories.car_like import car_like_experiment
 from agvdyn.trajectories.files import read_trajectory
+from agvdyn.trajectories.catalog import experiment
 
 __all__ = [
     "TrajectoryError", "LimitError", "FourierSeries", "CONTINUITY_TOLERANCE", "SEGMENT_NAMES", "Segment",

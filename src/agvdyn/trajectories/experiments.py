@@ -1,11 +1,10 @@
 """Built-in experiments: the identification sequence of sec. 6.2 with its default excitation, the
 lane change of sec. 7 (validation), the lateral experiment, the lifted-wheel (single-axis) test of
-sec. 7, the car-like experiment for B_w on the floor (:mod:`agvdyn.trajectories.car_like`), and
-:func:`experiment` by name."""
+sec. 7; the car-like experiment for B_w on the floor is in :mod:`agvdyn.trajectories.car_like`, and
+:func:`~agvdyn.trajectories.catalog.experiment` (any of them by name, or a file) in :mod:`.catalog`."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import brentq
@@ -25,9 +24,9 @@ from agvdyn.trajectories.segments import (
 )
 
 __all__ = ["default_excitation", "default_periods", "identification_sequence", "lateral_experiment", "lane_change",
-           "lifted_wheel_experiment", "experiment", "EXPERIMENTS"]
+           "lifted_wheel_experiment", "EXPERIMENTS"]
 
-#: Names of the built-in experiments of :func:`experiment`.
+#: Names of the built-in experiments of :func:`agvdyn.trajectories.catalog.experiment`.
 EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel", "car-like")
 
 
@@ -227,27 +226,3 @@ def lifted_wheel_experiment(geom: Geometry = PROTOTYPE, *, duration: float = 24.
     zeros = np.zeros((t.size, 2))
     seg = Segment("lifted_wheel", Mode.PARKING, t, zeros, zeros, zeros, zeros, wheel_rates=rates)
     return Trajectory((seg,), geom, dt, "lifted_wheel")
-
-
-def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME) -> Trajectory:
-    """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``, ``lifted-wheel``,
-    ``car-like``) or a trajectory file."""
-    key = name.strip().lower().replace("_", "-")
-    if key == "identification":
-        return identification_sequence(geom, dt=dt)
-    if key == "lane-change":
-        return lane_change(geom, dt=dt)
-    if key == "lateral":
-        return lateral_experiment(geom, dt=dt)
-    if key == "lifted-wheel":
-        return lifted_wheel_experiment(geom, dt=dt)
-    if key == "car-like":
-        from agvdyn.trajectories.car_like import car_like_experiment
-
-        return car_like_experiment(geom, dt=dt)
-    if Path(name).suffix.lower() in (".csv", ".yaml", ".yml"):
-        from agvdyn.trajectories.files import read_trajectory
-
-        return read_trajectory(name, geom, dt=dt)
-    raise TrajectoryError(f"unknown experiment {name!r}: expected one of {', '.join(EXPERIMENTS)} "
-                          "or a trajectory file (.csv, .yaml)")

@@ -21,6 +21,7 @@ from agvdyn.kinematics import (
 )
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry
 from agvdyn.trajectories.errors import TrajectoryError
+from agvdyn.trajectories.experiments import lane_change
 from agvdyn.trajectories.fourier import FourierSeries
 from agvdyn.trajectories.segments import CONTINUITY_TOLERANCE, Segment, Trajectory, _grid, alignment, fourier_segment
 
@@ -168,8 +169,6 @@ def _read_yaml_trajectory(path: Path, geom: Geometry, dt: float) -> Trajectory:
                 unknown = set(spec) - keys - {"name", "mode"}
                 if unknown:
                     raise TrajectoryError(f"unknown keys {sorted(unknown)}: expected some of {sorted(keys)}")
-                from agvdyn.trajectories.experiments import lane_change
-
                 seg = lane_change(geom, dt=dt, **{k: float(v) for k, v in spec.items() if k in keys}).segments[0]
             else:
                 mode = Mode.from_label(spec.get("mode", ""))

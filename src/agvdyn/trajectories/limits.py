@@ -1,14 +1,14 @@
-"""Limits a planned trajectory must respect, and the floor space it occupies (sec. 6.2)."""
+"""Limits a planned trajectory must respect, and the floor space it occupies (sec. 6.2; :class:`FloorSpace`
+and :func:`floor_space` are defined with the trajectory in :mod:`.segments`, re-exported here)."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from agvdyn.platform import PAPER_PARAMETERS, Parameters
 from agvdyn.trajectories.errors import LimitError, TrajectoryError
-from agvdyn.trajectories.segments import Trajectory
+from agvdyn.trajectories.segments import FloorSpace, Trajectory, floor_space  # noqa: F401  (re-exported)
 
 __all__ = ["Limits", "LimitReport", "limit_report", "check_limits", "FloorSpace", "floor_space"]
 
@@ -103,29 +103,3 @@ def check_limits(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits
                 f"{report.peaks[k]:.4g} > {report.limits[k]:.4g}"
             )
     return report
-
-
-@dataclass(frozen=True)
-class FloorSpace:
-    """Rectangle occupied by an experiment (sec. 6.2): length along the straight motion, width."""
-
-    length: float
-    width: float
-
-    @property
-    def area(self) -> float:
-        return self.length * self.width
-
-
-def floor_space(traj: Trajectory) -> FloorSpace:
-    """Floor space of sec. 6.2: length ``l + 2 max |x_ch|`` and width ``sqrt(l^2 + b^2) + 2a``.
-
-    ``x_ch`` is the planned position along the chassis x axis (the longitudinal travel of every
-    segment); for a lane change (mode 2) ``2 max |y|`` of the planned path is added to the width.
-    """
-    g = traj.geometry
-    pose = traj.pose()
-    x_max = float(np.max(np.abs(pose[:, 0]))) if len(pose) else 0.0
-    y_max = float(np.max(np.abs(pose[:, 1])))
-    return FloorSpace(g.l + 2 * x_max, math.hypot(g.l, g.b) + 2 * abs(g.a) + 2 * y_max)
-

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,20 +26,17 @@ from agvdyn.kinematics import (
     steering_from_virtual,
 )
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
+from agvdyn.segments_vocabulary import SEGMENTS
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.fourier import FourierSeries
 
-if TYPE_CHECKING:
-    from agvdyn.trajectories.limits import FloorSpace
-
-__all__ = ["CONTINUITY_TOLERANCE", "SEGMENT_NAMES", "Segment", "Trajectory", "pose_from_velocities", "alignment",
-           "fourier_segment"]
+__all__ = ["CONTINUITY_TOLERANCE", "SEGMENT_NAMES", "Segment", "Trajectory", "FloorSpace", "floor_space",
+           "pose_from_velocities", "alignment", "fourier_segment"]
 
 #: Largest jump of the steering angles (rad) allowed between the end of a segment and the next one.
 CONTINUITY_TOLERANCE = 1e-3
-#: Segment names of PLATFORM.md (the ``segment`` column of a log).
-SEGMENT_NAMES = ("steer_left", "steer_right", "straight", "rotation", "lateral", "lane_change", "align",
-                 "lifted_wheel")
+#: Segment names of PLATFORM.md (the ``segment`` column of a log): :data:`agvdyn.segments_vocabulary.SEGMENTS`.
+SEGMENT_NAMES = SEGMENTS
 
 
 # --- segments and trajectories --------------------------------------------------------------------
@@ -241,14 +237,37 @@ class Trajectory:
             q_dot = self.joint_motion()[0]
         return pose_from_velocities(q_dot[:, :3], self.sample_time)
 
-    def floor_space(self) -> "FloorSpace":
-        """Floor space of sec. 6.2 (:func:`agvdyn.trajectories.limits.floor_space`)."""
-        from agvdyn.trajectories.limits import floor_space
-
+    def floor_space(self) -> FloorSpace:
+        """Floor space of sec. 6.2 (:func:`floor_space`)."""
         return floor_space(self)
 
     def segment_slices(self) -> list[tuple[str, slice]]:
         return [(s.name, slice(int(a), int(b))) for s, a, b in zip(self.segments, self.bounds[:-1], self.bounds[1:])]
+
+
+@dataclass(frozen=True)
+class FloorSpace:
+    """Rectangle occupied by an experiment (sec. 6.2): length along the straight motion, width."""
+
+    length: float
+    width: float
+
+    @property
+    def area(self) -> float:
+        return self.length * self.width
+
+
+def floor_space(traj: Trajectory) -> FloorSpace:
+    """Floor space of sec. 6.2: length ``l + 2 max |x_ch|`` and width ``sqrt(l^2 + b^2) + 2a``.
+
+    ``x_ch`` is the planned position along the chassis x axis (the longitudinal travel of every
+    segment); for a lane change (mode 2) ``2 max |y|`` of the planned path is added to the width.
+    """
+    g = traj.geometry
+    pose = traj.pose()
+    x_max = float(np.max(np.abs(pose[:, 0]))) if len(pose) else 0.0
+    y_max = float(np.max(np.abs(pose[:, 1])))
+    return FloorSpace(g.l + 2 * x_max, math.hypot(g.l, g.b) + 2 * abs(g.a) + 2 * y_max)
 
 
 def _times_columns(x: np.ndarray, H: np.ndarray) -> np.ndarray:

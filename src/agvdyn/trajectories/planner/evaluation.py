@@ -11,6 +11,7 @@ from agvdyn.determinacy import std_from_information
 from agvdyn.dynamics import projected_regressor
 from agvdyn.kinematics import Mode, joint_motion, kinematic_model
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
+from agvdyn.row_rules import row_mask
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.experiments import default_excitation, default_periods, identification_sequence
 from agvdyn.trajectories.fourier import FourierSeries
@@ -56,16 +57,6 @@ def _coordinates(seg) -> list[tuple[int, str]]:
     return list(enumerate(seg.mode.coordinates))
 
 
-def _guarded(keep: np.ndarray, guard: int) -> np.ndarray:
-    """``keep`` with rows within ``guard`` samples of a dropped row or an end dropped too."""
-    if guard <= 0:
-        return keep
-    bad = np.concatenate([np.ones(guard, int), (~keep).astype(int), np.ones(guard, int)])
-    cs = np.concatenate([[0], np.cumsum(bad)])
-    n = keep.size
-    return (cs[2 * guard + 1: 2 * guard + 1 + n] - cs[:n]) == 0
-
-
 def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
@@ -90,7 +81,7 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
                                       noise.saturation, settings.guard(coord, weights=True)).wU
                 keep = keep_w > 1e-6
             else:
-                keep = _guarded(np.abs(v) >= th, int(round(settings.guard(coord) / traj.sample_time)))
+                keep = row_mask(v, th, settings.guard_samples(coord, traj.sample_time))  # the identification's
                 keep_w = keep.astype(float)
             if not keep.any():
                 continue

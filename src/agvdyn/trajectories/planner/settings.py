@@ -9,6 +9,8 @@ import numpy as np
 
 from agvdyn.kinematics import Mode
 from agvdyn.platform import PARAMETER_NAMES
+from agvdyn.row_rules import RowSettings
+from agvdyn.segments_vocabulary import IDENTIFICATION_SEGMENTS, segment_mode
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.limits import FloorSpace
 
@@ -20,11 +22,10 @@ if TYPE_CHECKING:
 OBJECTIVES = ("std", "d-optimal", "cond")
 Objective = Literal["std", "d-optimal", "cond"]
 
-#: The four phases of sec. 6.2 in their execution order: (name, mode).
-PHASES: tuple[tuple[str, Mode], ...] = (
-    ("steer_left", Mode.PARKING), ("steer_right", Mode.PARKING), ("straight", Mode.STRAIGHT),
-    ("rotation", Mode.ROTATION),
-)
+#: The four phases of sec. 6.2 in their execution order: (name, mode)
+#: (:data:`agvdyn.segments_vocabulary.IDENTIFICATION_SEGMENTS`).
+PHASES: tuple[tuple[str, Mode], ...] = tuple((name, Mode.from_label(segment_mode(name)))
+                                             for name in IDENTIFICATION_SEGMENTS)
 #: The ten parameters the sequence identifies (B_w is known, sec. 6.3).
 FREE = PARAMETER_NAMES[:10]
 _OFFSETS = 4
@@ -146,14 +147,15 @@ class PlanSettings:
         ``parameter_margins`` overrides it by name: the stds that rest on few jackknife blocks
         (m_ch, C_ch, d_vw) or whose default-sequence prediction is high (d_cw) scatter most
         against the default's and get 0.45-0.5.
-    steering_threshold, stiction_threshold, stiction_guard, steering_guard : the identification's
-        stiction thresholds (rad/s steering; m/s, rad/s chassis) and guards (s, chassis and steering)
-        used to predict which rows it keeps (the defaults of ``IdentificationSettings``: 0.1, 0.05,
-        2 / 40 rad/s, 4 / 40 rad/s), in the exact evaluation (``evaluate_sequence``: cond and stds).
-    steering_weights_guard : the steering guard the optimiser's smooth row weights assume (s), 0.05:
-        shorter than the identification's, so its reversal model counts the rows 50-100 ms after a
-        reversal as contaminated and avoids them; with 0.1 s its plans were worse on the prototype
-        (docs/planning.md, "Stop 23: a longer guard").
+    rows : the identification's row rules (:class:`agvdyn.row_rules.RowSettings`, the same object as
+        ``IdentificationSettings.rows``): its stiction thresholds (rad/s steering; m/s, rad/s chassis)
+        and guards (multiples of ``1 / filter.cutoff``: 2 / 40 rad/s = 0.05 s chassis, 4 / 40 rad/s =
+        0.1 s steering) predict which rows it keeps in the exact evaluation (``evaluate_sequence``:
+        cond and stds), with the same mask (:func:`agvdyn.row_rules.row_mask`).
+    steering_weights_guard : the steering guard the optimiser's smooth row weights assume, in the unit
+        of ``rows``' guards: 2 (0.05 s at 40 rad/s), shorter than the identification's 4, so its reversal
+        model counts the rows 50-100 ms after a reversal as contaminated and avoids them; with 0.1 s its
+        plans were worse on the prototype (docs/planning.md, "Stop 23: a longer guard").
     validity : rows count in the objective from ``validity`` times the threshold on (smooth step
         of relative width ``validity_width``): slow motion is where the friction model is least true.
     band_penalty : weight of the share of the phases' time spent below that speed.
@@ -203,11 +205,8 @@ class PlanSettings:
     max_acceleration: float = 0.6
     reference_margin: float = 0.6
     parameter_margins: tuple[tuple[str, float], ...] = (("m_ch", 0.45), ("C_ch", 0.5), ("d_vw", 0.5), ("d_cw", 0.5))
-    steering_threshold: float = 0.1
-    stiction_threshold: float = 0.05
-    stiction_guard: float = 0.05
-    steering_guard: float = 0.1
-    steering_weights_guard: float = 0.05
+    rows: RowSettings = RowSettings()
+    steering_weights_guard: float = 2.0
     validity: float = 2.0
     validity_width: float = 0.15
     band_penalty: float = 0.5
@@ -238,13 +237,17 @@ class PlanSettings:
         if not (isinstance(lo, int) and isinstance(hi, int) and 2 <= lo <= hi):
             raise TrajectoryError(f"harmonics={self.harmonics!r}: expected two integers 2 <= fewest <= most")
         for key in ("max_frequency", "min_phase", "steering_excursion", "max_heading", "max_speed", "max_acceleration",
-                    "reference_margin", "steering_threshold",
-                    "stiction_threshold", "validity", "validity_width", "cond_target", "margin", "align_rate",
+                    "reference_margin", "validity", "validity_width", "cond_target", "margin", "align_rate",
                     "align_acceleration", "grid"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise TrajectoryError(f"plan setting {key}={value!r}: expected a finite number > 0")
-        for key in ("stiction_guard", "steering_guard", "steering_weights_guard", "pause", "reference_penalty",
+        if not isinstance(self.rows, RowSettings):
+            raise TrajectoryError(f"rows={self.rows!r}: expected the identification's RowSettings")
+        for key in ("stiction_threshold", "steering_threshold"):
+            if not getattr(self.rows, key) > 0:
+                raise TrajectoryError(f"plan setting rows.{key}={getattr(self.rows, key)!r}: expected a number > 0")
+        for key in ("steering_weights_guard", "pause", "reference_penalty",
                     "band_penalty", "reversal_window", "reversal_penalty"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -286,14 +289,22 @@ class PlanSettings:
         return self.weights_noise if weights else self.noise
 
     def threshold(self, coordinate: str) -> float:
-        return self.steering_threshold if coordinate.startswith("alpha") else self.stiction_threshold
+        """The identification's stiction threshold of ``coordinate`` (``rows``)."""
+        return self.rows.threshold(coordinate)
+
+    def _guard_multiple(self, coordinate: str, weights: bool) -> float:
+        if weights and coordinate.startswith("alpha"):
+            return self.steering_weights_guard
+        return self.rows.guards()[coordinate]
 
     def guard(self, coordinate: str, weights: bool = False) -> float:
         """The identification's stiction guard of ``coordinate``, s (``weights``: the one the optimiser's
         row weights assume)."""
-        if not coordinate.startswith("alpha"):
-            return self.stiction_guard
-        return self.steering_weights_guard if weights else self.steering_guard
+        return self.rows.seconds(self._guard_multiple(coordinate, weights))
+
+    def guard_samples(self, coordinate: str, dt: float) -> int:
+        """The identification's stiction guard of ``coordinate`` in samples of ``dt`` s (as its rows')."""
+        return self.rows.guard_samples(self._guard_multiple(coordinate, False), dt)
 
 
 #: Searches of the optimiser (:meth:`PlanSettings.search`, ``agvdyn plan --search``). ``wide``: the
