@@ -41,14 +41,10 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
 #: Imports allowed against the rules, each with its reason: (importer, imported) -> reason.
 UPWARD_EXCEPTIONS: dict[tuple[str, str], str] = {
     ("agvdyn.simulation", "agvdyn.io"):
-        "SimulationResult.write saves the simulated log in the log schema (agvdyn.io.write_log, imported in "
+        "SimulationResult.write (simulation/result.py) saves the simulated log in the log schema (agvdyn.io.write_log, imported in "
         "the method); io never imports the simulation",
 }
-CIRCLE_EXCEPTIONS: dict[frozenset[str], str] = {
-    frozenset({"agvdyn.simulation", "agvdyn.simulation.lifted"}):
-        "SimulationResult lives in the package's __init__, which imports lifted; lifted imports it back in its "
-        "function; to be removed by moving SimulationResult to a module of its own",
-}
+CIRCLE_EXCEPTIONS: dict[frozenset[str], str] = {}
 
 
 def _module_name(path: Path, package: Path = PACKAGE) -> str:

@@ -19,6 +19,7 @@ import numpy as np
 from agvdyn.platform import Geometry, Parameters
 from agvdyn.simulation._lifted_kernels import run_lifted_chunk
 from agvdyn.simulation._setup import prepare_run, run_chunks
+from agvdyn.simulation.result import SimulationResult
 from agvdyn.trajectories import Trajectory
 
 __all__ = ["simulate_lifted"]
@@ -30,8 +31,6 @@ LIFTED_STATE_SIZE = 13
 def simulate_lifted(traj: Trajectory, platform: Geometry, plant_params: Parameters, controller_params: Parameters,
                     settings, seed: int, progress: Callable[[int, int], None] | None = None):
     """Simulate a lifted-wheel trajectory (``traj.lifted``); returns a :class:`SimulationResult`."""
-    from agvdyn.simulation import SimulationResult
-
     if settings.slip.active:
         raise ValueError("a slip scenario needs ground contact: the lifted-wheel experiment has none")
     Ts = settings.sample_time
