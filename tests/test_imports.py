@@ -33,6 +33,7 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("signals", ("agvdyn.signals",)),
     ("identification", ("agvdyn.identification", "agvdyn.preflight", "agvdyn.batch", "agvdyn.montecarlo",
                         "agvdyn.plan_check")),
+    ("online", ("agvdyn.online",)),  # payload tracking: above identification (its row rules), issue 31
     ("validation", ("agvdyn.validation",)),
     ("report", ("agvdyn.report", "agvdyn.plots", "agvdyn.figure_data", "agvdyn.demo")),
     ("cli", ("agvdyn.cli",)),  # the CLI may import anything

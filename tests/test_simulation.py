@@ -403,3 +403,89 @@ def test_tanh_ratio_equals_tanh_over_x():
     for x in np.concatenate([[0.0, 1e-12, 1e-5], np.linspace(1e-4, 0.2, 2001), [0.2 + 1e-12, 0.3, 1.0, 5.0, 50.0]]):
         want = 1.0 if x == 0 else math.tanh(x) / x
         assert abs(_tanh_ratio(x * x) - want) <= 4e-16 * want
+
+
+# --- payload (issue 31, simulation/payload.py) ---
+
+def test_payload_terms_do_no_work_and_are_a_rigid_body():
+    """With a payload (300 kg at (0.3, -0.2) m, 40 kg m^2): M is the unloaded one plus the rigid-body
+    block of the load, positive definite, and v^T h = 1/2 v^T dM/dt v still holds (the payload's
+    forces do no work)."""
+    from agvdyn.simulation._plant_kernels import _bias, _mass_matrix
+    from agvdyn.simulation.payload import PayloadEvent
+    from agvdyn.simulation.plant import set_payload
+
+    c0 = plant_constants(G, P, PlantSettings())
+    c = c0.copy()
+    ev = PayloadEvent(0.0, 300.0, 0.3, -0.2, 40.0)
+    set_payload(c, ev.moments(), P.m_ch)
+    rng = np.random.default_rng(2)
+    M0, M, M1, M2, h = *(np.zeros((9, 9)) for _ in range(4)), np.zeros(9)
+    for _ in range(30):
+        alpha = rng.uniform(-1.5, 1.5, 2)
+        v = rng.normal(size=9)
+        _mass_matrix(c0, alpha, M0)
+        _mass_matrix(c, alpha, M)
+        block = np.array([[300.0, 0, 60.0], [0, 300.0, 90.0], [60.0, 90.0, 40.0 + 300.0 * 0.13]])  # -m y, m x
+        np.testing.assert_allclose((M - M0)[:3, :3], block, atol=1e-9)
+        assert np.all(np.linalg.eigvalsh(M) > 0)
+        _bias(c, alpha, v, h)
+        eps = 1e-6
+        _mass_matrix(c, alpha + eps * v[3:5], M1)
+        _mass_matrix(c, alpha - eps * v[3:5], M2)
+        assert v @ h == pytest.approx(0.5 * v @ ((M1 - M2) / (2 * eps)) @ v, rel=1e-6, abs=1e-8)
+
+
+def test_payload_power_balance_and_truth(short_sequence):
+    """Motor work = dissipated + stop work + change of kinetic energy + the jumps at the events
+    (velocities continuous, 1/2 v^T (M' - M) v), within the 1e-3 of the run without a payload;
+    the sidecar's truth: m_ch, C_ch (parallel axis), centre of mass."""
+    from agvdyn.simulation.payload import PayloadEvent
+
+    events = (PayloadEvent(12.0, 300.0, 0.3, -0.2, 40.0), PayloadEvent(19.0, -100.0, 0.5, 0.1, 5.0))
+    r = simulate(short_sequence, settings=SimulationSettings(payload=events), seed=3)
+    w_motor, w_diss, w_stop = r.work[-1]
+    jumps = sum(p.energy_jump for p in r.payload_truth)
+    assert abs(jumps) > 0.1
+    assert abs(r.energy[-1] - r.energy[0] + w_diss - w_stop - w_motor - jumps) < 1e-3 * w_motor
+    first, second = r.payload_truth
+    assert first.m_ch == pytest.approx(P.m_ch + 300.0) and second.m_ch == pytest.approx(P.m_ch + 200.0)
+    assert first.C_ch == pytest.approx(P.C_ch + 40.0 + 300.0 * 0.13)
+    assert first.x_c == pytest.approx(90.0 / first.m_ch) and second.t_applied == pytest.approx(19.0)
+    side = yaml.safe_load(yaml.safe_dump(r.sidecar()))
+    assert [p["t"] for p in side["payload_truth"]] == [12.0, 19.0]
+    assert "payload" in side["settings"]
+
+
+def test_no_payload_event_in_the_run_changes_nothing(short_sequence):
+    """An event after the end applies to no sample: the log equals the one without a payload."""
+    from agvdyn.simulation.payload import PayloadEvent
+
+    base = simulate(short_sequence, seed=4)
+    late = simulate(short_sequence, settings=SimulationSettings(payload=(PayloadEvent(999.0, 100.0),)), seed=4)
+    assert late.payload_truth == ()
+    np.testing.assert_array_equal(base.log_frame().to_numpy(), late.log_frame().to_numpy())
+    assert "payload_truth" not in base.sidecar() and "payload" not in base.settings.to_dict()
+
+
+def test_parse_payload():
+    from agvdyn.simulation.payload import PayloadEvent, parse_payload
+
+    assert parse_payload("20:300") == PayloadEvent(20.0, 300.0)
+    assert parse_payload("20:-150:0.2,-0.1:45") == PayloadEvent(20.0, -150.0, 0.2, -0.1, 45.0)
+    for bad in ("20", "20:0", "x:300", "20:300:0.2", "-1:300", "20:300:0,0:-5"):
+        with pytest.raises(ValueError, match="--payload"):
+            parse_payload(bad)
+
+
+def test_driving_experiment_stays_on_its_floor_within_the_limits():
+    from agvdyn.trajectories import check_limits, experiment
+
+    traj = experiment("driving", duration=120, floor=(14.0, 8.0), seed=5)
+    assert traj.duration >= 120 and {"straight", "rotation", "lane_change", "align"} >= set(traj.segment)
+    assert {"straight", "rotation"} <= set(traj.segment)
+    check_limits(traj)
+    pose = traj.pose()
+    assert np.abs(pose[:, 0]).max() < 7.0 and np.abs(pose[:, 1]).max() < 4.0
+    with pytest.raises(Exception, match="floor"):
+        experiment("driving", floor=(2.0, 2.0))

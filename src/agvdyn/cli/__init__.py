@@ -13,6 +13,7 @@ from agvdyn.cli import study_commands  # noqa: E402,F401
 from agvdyn.cli import batch_commands  # noqa: E402,F401
 from agvdyn.cli import plan_commands  # noqa: E402,F401
 from agvdyn.cli import export_commands  # noqa: E402,F401
+from agvdyn.cli import track_commands  # noqa: E402,F401
 
 
 def main() -> None:

@@ -14,7 +14,7 @@ from agvdyn._files import write_atomically
 from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.cli._outputs import LOG_AND_SIDECAR, refuse_overwrite, sidecar_of, trajectory_input
 
-_EXPERIMENT_HELP = ("identification, lane-change, lateral, lifted-wheel, car-like, or a trajectory file (.csv / .yaml, "
+_EXPERIMENT_HELP = ("identification, lane-change, lateral, lifted-wheel, car-like, driving, or a trajectory file (.csv / .yaml, "
                     "see docs/simulation.md).")
 
 
@@ -92,6 +92,14 @@ def simulate(
                                   "<out>.mjcf.xml; see docs/simulation.md)."),
     mjcf: Optional[Path] = typer.Option(None, "--mjcf", help="With --engine mujoco: run this MJCF (e.g. from "
                                         "'agvdyn export') instead; it holds platform and true parameters."),
+    payload: Optional[list[str]] = typer.Option(None, "--payload", help="T:MASS[:X,Y[:C]] pick-up of MASS kg at "
+                                                "T s at (X, Y) m in the chassis frame with yaw inertia C kg m^2 "
+                                                "about its centre (negative mass: drop); repeatable; our plant "
+                                                "only; sidecar: payload_truth."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="driving only: length of the shift, s "
+                                             "(default 300)."),
+    floor: Optional[str] = typer.Option(None, "--floor", help="driving only: floor LENGTHxWIDTH in m (default "
+                                        "20x10); the route is drawn with --seed."),
 ) -> None:
     """Simulate an experiment in closed loop (plant with tyre slip, or MuJoCo) and write the log the sensors record."""
     from dataclasses import replace
@@ -118,6 +126,14 @@ def simulate(
         sim_settings = replace(sim_settings, plant=sim_settings.plant.ideal())
     if slip:
         sim_settings = replace(sim_settings, slip=SLIP_SCENARIO)
+    if payload:
+        from agvdyn.simulation.payload import parse_payload
+
+        try:
+            sim_settings = replace(sim_settings, payload=tuple(parse_payload(p) for p in payload))
+        except ValueError as exc:
+            raise fail(str(exc)) from exc
+    experiment = _driving(experiment, duration, floor, seed, platform_option(platform))
     geom = platform_option(platform)
     true_params = _params(params)
     ctrl_params = None if controller_params is None else _params(controller_params)
@@ -132,7 +148,7 @@ def simulate(
             with Progress(TextColumn("simulating {task.description}"), BarColumn(),
                           TextColumn("{task.completed:.1f} s of motion"), TimeElapsedColumn(),
                           console=console) as bar:
-                task = bar.add_task(experiment, total=None)
+                task = bar.add_task(str(getattr(experiment, "name", experiment)), total=None)
 
                 def progress(done: int, total: int) -> None:
                     bar.update(task, completed=done * SAMPLE_TIME, total=total * SAMPLE_TIME)
@@ -154,6 +170,30 @@ def simulate(
                           "(sidecar: slip_truth)")
     typer.echo(f"wrote {path} ({result.trajectory.n_samples:,} samples) and {path}.yaml"
                + (f" and {model_out}" if on_mujoco else ""))
+
+
+def _driving(experiment: str, duration: Optional[float], floor: Optional[str], seed: int, geom):
+    """The ``driving`` experiment with --duration, --floor and the route of --seed; other experiments
+    unchanged (and refuse those options)."""
+    if experiment.strip().lower() != "driving":
+        if duration is not None or floor is not None:
+            raise fail(f"--duration and --floor belong to the driving experiment, not {experiment!r}")
+        return experiment
+    from agvdyn.trajectories import TrajectoryError, experiment as build
+
+    options: dict = {"seed": seed}
+    if duration is not None:
+        options["duration"] = duration
+    if floor is not None:
+        try:
+            length, width = (float(x) for x in floor.lower().split("x"))
+        except ValueError:
+            raise fail(f"--floor {floor!r}: expected LENGTHxWIDTH in m, e.g. 20x10") from None
+        options["floor"] = (length, width)
+    try:
+        return build("driving", geom, **options)
+    except TrajectoryError as exc:
+        raise fail(str(exc)) from exc
 
 
 class _Engine(str, Enum):

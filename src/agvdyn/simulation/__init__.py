@@ -113,6 +113,8 @@ def simulate(
     ctrl_params = plant_params if controller_params is None else controller_params
     if traj.lifted and vehicle is not None:
         raise ValueError(f"experiment {traj.name!r}: the lifted-wheel experiment runs on engine='ours' only")
+    if traj.lifted and settings.payload:
+        raise ValueError(f"experiment {traj.name!r}: payload events need the vehicle on the ground")
     if traj.lifted:  # the single-axis experiment of sec. 7 (lifted.py)
         from agvdyn.simulation.lifted import simulate_lifted
 
@@ -130,6 +132,14 @@ def simulate(
                   out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
                   st.energy, out["work"])
 
+    truths: list = []
+    if settings.payload:
+        if vehicle is not None:
+            raise ValueError("payload events run on engine='ours' only (the MuJoCo plant has no payload)")
+        from agvdyn.simulation.payload import payload_stepper
+
+        step = payload_stepper(step, st.c, st.pos, st.vel, settings.payload, plant_params.m_ch, plant_params.C_ch,
+                               Ts, truths)  # noqa: F811
     if vehicle is not None:
         from agvdyn.simulation.mujoco_plant import mujoco_stepper
 
@@ -145,6 +155,7 @@ def simulate(
         traj, platform, plant_params, ctrl_params, settings, seed,
         out["pos"], out["vel"], st.q_dot_d, st.beta_d, st.u_ff, out["alpha"], out["beta"],
         out["cmd"], out["app"], out["meas"], energy, out["work"], burst, engine=engine, vehicle=vehicle,
+        payload_truth=tuple(truths),
     )
 
 

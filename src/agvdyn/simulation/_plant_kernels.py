@@ -20,6 +20,10 @@ from numba import njit
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
  _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
 _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
+#: Payload carried by the chassis (simulation/payload.py): mass m_p, first moments m_p x_p and m_p y_p
+#: about the reference point, yaw inertia J_p about the reference point (zero without a payload).
+_PM, _PSX, _PSY, _PJ = range(_NCONST, _NCONST + 4)
+_NCONST += 4
 
 #: Compiled and cached; a division by zero gives inf or nan (caught as divergence) instead of a
 #: Python exception, which spares a check at every division.
@@ -55,6 +59,29 @@ def _unit_trig(alpha_l, alpha_r, tr):
 
 
 @_jit_borrow
+def _payload_terms(c, v, M, bias):
+    """Add the payload, a rigid body fixed to the chassis, to M and h (plant.py, "Payload"):
+    mass m_p, first moments (S_x, S_y) = m_p (x_p, y_p), yaw inertia J_p about the reference point.
+    Velocity of its centre (v_x - omega y_p, v_y + omega x_p); the kinetic energy
+    ``m_p/2 (v_x^2 + v_y^2) + J_p/2 omega^2 + omega (S_x v_y - S_y v_x)`` gives
+    ``M[0,0] = M[1,1] = m_p``, ``M[2,2] = J_p``, ``M[0,2] = -S_y``, ``M[1,2] = S_x`` and the forces of
+    the body-frame (quasi-velocity) equations ``h = (-omega (m_p v_y + omega S_x),
+    omega (m_p v_x - omega S_y), omega (S_x v_x + S_y v_y))``, which do no work (v . h = 0)."""
+    m, sx, sy = c[_PM], c[_PSX], c[_PSY]
+    w = v[2]
+    M[0, 0] += m
+    M[1, 1] += m
+    M[2, 2] += c[_PJ]
+    M[0, 2] -= sy
+    M[2, 0] -= sy
+    M[1, 2] += sx
+    M[2, 1] += sx
+    bias[0] -= w * (m * v[1] + w * sx)
+    bias[1] += w * (m * v[0] - w * sy)
+    bias[2] += w * (sx * v[0] + sy * v[1])
+
+
+@_jit_borrow
 def _inertia_terms(c, tr, v, M, bias):
     """Mass matrix M(alpha) (9, 9) and Coriolis and centrifugal forces h(alpha, v) (9,) of the
     plant (body-frame velocities) from the unit headings ``tr``."""
@@ -66,6 +93,8 @@ def _inertia_terms(c, tr, v, M, bias):
     w = v[2]
     bias[0] = -c[_MB] * w * v[1]
     bias[1] = c[_MB] * w * v[0]
+    if c[_PM] != 0.0 or c[_PJ] != 0.0:
+        _payload_terms(c, v, M, bias)
     m_u, e = c[_MU_MASS], c[_EU]
     for i in range(4):
         side, s, h, cx, cy = _unit_frame(c, i)

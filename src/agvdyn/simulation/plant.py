@@ -40,6 +40,16 @@ regularisation 100 times narrower than the model's tanh with epsilon = 0.01 rad/
 at up to 0.01 rad/s under any torque); above it the joint slides with ``d_c sign(v)``.
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
+Payload (issue 31, payload.py): a load fixed to the chassis, mass ``m_p``, first moments
+``S = m_p (x_p, y_p)`` and yaw inertia ``J_p`` about the reference point, adds to the chassis block
+``M[0,0] = M[1,1] += m_p``, ``M[2,2] += J_p``, ``M[0,2] = M[2,0] -= S_y``, ``M[1,2] = M[2,1] += S_x``
+(from its kinetic energy ``m_p/2 |v|^2 + J_p/2 omega^2 + omega (S_x v_y - S_y v_x)``) and to the
+body-frame forces ``h += (-omega (m_p v_y + omega S_x), omega (m_p v_x - omega S_y),
+omega (S_x v_x + S_y v_y))``: exact rigid-body terms (``v . h = 0``: they do no work). With an
+offset the chassis' centre of mass leaves the reference point, and translation and yaw couple.
+:func:`set_payload` writes them into the constants between samples (``simulate`` splits its chunks
+at the events); without a payload the kernels skip the terms (logs bit-identical).
+
 The compiled plant is in ``_plant_kernels.py``, the closed loop that drives it in ``_kernels.py``.
 """
 from __future__ import annotations
@@ -58,7 +68,7 @@ from agvdyn.simulation._kernels import kinetic_energy, run_open_loop  # noqa: F4
 from agvdyn.simulation._plant_kernels import (  # noqa: F401  (compiled plant, re-exported)
     _A, _B, _BW, _CB, _CLAT, _CLONG, _COUL, _DCL, _DCR, _DSTOP, _DVL, _DVR, _DVW, _DCW, _EPS, _EU, _FZ, _IG,
     _JUL, _JUR, _KSTOP, _L, _MB, _MU, _MU_MASS, _NCONST, _R, _RATIO, _RW, _TLIM, _V0, _VSTICK, _VSTRIB,
-    _mass_matrix, plant_step,
+    _PJ, _PM, _PSX, _PSY, _mass_matrix, plant_step,
 )
 
 _COULOMB = {"stiction": 0.0, "tanh": 1.0, "none": 2.0}
@@ -171,4 +181,12 @@ def plant_constants(geom: Geometry, params: Parameters, settings: PlantSettings)
 
 
 
-__all__ = ["GRAVITY", "PlantSettings", "plant_constants", "plant_step", "kinetic_energy", "run_open_loop"]
+def set_payload(c: np.ndarray, moments: np.ndarray, m_ch: float) -> None:
+    """Write a payload (``moments`` = (m_p, S_x, S_y, J_p), payload.py) into the plant constants ``c``
+    in place; ``m_ch`` the unloaded chassis mass (the tyres' normal load becomes (m_ch + m_p) g / 4)."""
+    c[_PM], c[_PSX], c[_PSY], c[_PJ] = (float(x) for x in moments)
+    c[_FZ] = (m_ch + float(moments[0])) * GRAVITY / 4
+
+
+__all__ = ["GRAVITY", "PlantSettings", "plant_constants", "plant_step", "kinetic_energy", "run_open_loop",
+           "set_payload"]

@@ -35,6 +35,7 @@ class SimulationResult:
     ``torque_applied`` (N, 4) = command after the torque limit + burst, what the motors apply.
     Energy: ``energy`` (N,) kinetic energy, ``work`` (N, 3) cumulative (motor, dissipated, stops) work.
     True slip: ``slip_speed`` (N, 4), ``contact_points`` (N, 4, 2), :meth:`slip_intervals`.
+    Payload: ``payload_truth`` the loads picked up and dropped (:mod:`agvdyn.simulation.payload`).
     """
 
     trajectory: Trajectory
@@ -60,6 +61,8 @@ class SimulationResult:
     #: ``"ours"`` or ``"mujoco"`` (ENGINES); ``vehicle`` the MuJoCo vehicle (mujoco_plant.MujocoVehicle) that ran
     engine: str = "ours"
     vehicle: Any = None
+    #: the payload events that happened (:class:`agvdyn.simulation.payload.PayloadTruth`), in time order
+    payload_truth: tuple = ()
 
     @property
     def t(self) -> np.ndarray:
@@ -192,6 +195,8 @@ class SimulationResult:
             "slip_truth_merge_gap": MERGE_GAP,
             "slip_truth": [s.to_dict() for s in self.slip_intervals(SLIP_THRESHOLD)],
         }
+        if self.payload_truth:  # truth of the payload changes (only when there are some: logs without unchanged)
+            side["payload_truth"] = [p.to_dict() for p in self.payload_truth]
         if self.vehicle is not None:  # MuJoCo: the engine's facts replace our plant's
             side["plant"] = {"wheel_radii": [float(x) for x in self.vehicle.wheel_radii],
                              "torque_limit": self.settings.plant.torque_limit}

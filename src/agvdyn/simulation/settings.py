@@ -10,6 +10,7 @@ from typing import Any
 
 from agvdyn.platform import SAMPLE_TIME
 from agvdyn.simulation.controller import ControllerSettings
+from agvdyn.simulation.payload import PayloadEvent, payload_from_list
 from agvdyn.simulation.plant import PlantSettings
 from agvdyn.simulation.sensors import SensorSettings
 from agvdyn.simulation.slip import SlipSettings
@@ -34,8 +35,12 @@ class SimulationSettings:
     check_limits: bool = True
     sample_time: float = SAMPLE_TIME
     slip: SlipSettings = field(default_factory=SlipSettings)
+    payload: tuple[PayloadEvent, ...] = ()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.payload, (list, tuple)) or not all(isinstance(e, PayloadEvent) for e in self.payload):
+            raise ValueError(f"payload={self.payload!r}: expected a list of PayloadEvent (agvdyn.simulation.payload)")
+        object.__setattr__(self, "payload", tuple(sorted(self.payload, key=lambda e: e.t)))
         if not (math.isfinite(self.sample_time) and self.sample_time > 0):
             raise ValueError(f"sample_time={self.sample_time!r}: expected > 0 s")
         if not isinstance(self.slip, SlipSettings):
@@ -46,7 +51,7 @@ class SimulationSettings:
             "plant": self.plant.to_dict(), "controller": self.controller.to_dict(),
             "sensors": self.sensors.to_dict(), "limits": dict(self.limits.__dict__),
             "check_limits": self.check_limits, "sample_time": self.sample_time, "slip": self.slip.to_dict(),
-        }
+        } | ({"payload": [e.to_dict() for e in self.payload]} if self.payload else {})
 
 
 _SETTING_GROUPS = {"plant": PlantSettings, "controller": ControllerSettings, "sensors": SensorSettings,
@@ -59,10 +64,10 @@ def settings_from_dict(data: dict[str, Any], source: str = "<settings>") -> Simu
     unknown keys are an error naming them."""
     if not isinstance(data, dict):
         raise ValueError(f"{source}: expected a mapping at the top level")
-    unknown = set(data) - set(_SETTING_GROUPS) - {"check_limits", "sample_time", "slip"}
+    unknown = set(data) - set(_SETTING_GROUPS) - {"check_limits", "sample_time", "slip", "payload"}
     if unknown:
         raise ValueError(f"{source}: unknown keys {sorted(unknown)}: expected some of "
-                         f"{sorted([*_SETTING_GROUPS, 'check_limits', 'sample_time', 'slip'])}")
+                         f"{sorted([*_SETTING_GROUPS, 'check_limits', 'payload', 'sample_time', 'slip'])}")
     groups: dict[str, Any] = {}
     for key, cls in _SETTING_GROUPS.items():
         values = data.get(key) or {}
@@ -80,7 +85,7 @@ def settings_from_dict(data: dict[str, Any], source: str = "<settings>") -> Simu
             raise ValueError(f"{source}: {key}: {exc}") from exc
     extra = {k: data[k] for k in ("check_limits", "sample_time") if k in data}
     slip = SlipSettings.from_dict(data.get("slip"), source)
-    return SimulationSettings(**groups, **extra, slip=slip)
+    return SimulationSettings(**groups, **extra, slip=slip, payload=payload_from_list(data.get("payload"), source))
 
 
 def read_settings(path: str | os.PathLike) -> SimulationSettings:

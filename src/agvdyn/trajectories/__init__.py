@@ -11,6 +11,7 @@ One module per job, data flowing one way::
     limits       Limits, limit_report, check_limits
     experiments  default excitation, identification sequence, lane change, lateral, lifted wheel
     car_like     the car-like experiment: fast rotation and tight turns for B_w (identify --fix none)
+    driving      the driving experiment: a warehouse shift (payload tracking, issue 31)
     files        read_trajectory (CSV / YAML), write_trajectory (YAML)
     catalog      experiment(name): a built-in experiment by name, or a trajectory file
     planner      plan(): optimal four-phase identification sequence in a floor rectangle
@@ -42,6 +43,7 @@ from agvdyn.trajectories.experiments import (
     lifted_wheel_experiment,
 )
 from agvdyn.trajectories.car_like import car_like_experiment
+from agvdyn.trajectories.driving import driving_experiment
 from agvdyn.trajectories.files import read_trajectory
 from agvdyn.trajectories.catalog import experiment
 
@@ -50,5 +52,5 @@ __all__ = [
     "Trajectory", "alignment", "fourier_segment", "pose_from_velocities", "FloorSpace", "LimitReport", "Limits",
     "check_limits", "floor_space", "limit_report", "default_excitation", "default_periods", "experiment",
     "identification_sequence", "lane_change", "lateral_experiment", "lifted_wheel_experiment", "EXPERIMENTS",
-    "car_like_experiment", "read_trajectory",
+    "car_like_experiment", "driving_experiment", "read_trajectory",
 ]

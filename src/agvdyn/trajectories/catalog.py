@@ -6,6 +6,7 @@ from pathlib import Path
 
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry
 from agvdyn.trajectories.car_like import car_like_experiment
+from agvdyn.trajectories.driving import driving_experiment
 from agvdyn.trajectories.errors import TrajectoryError
 from agvdyn.trajectories.experiments import (
     EXPERIMENTS,
@@ -20,10 +21,15 @@ from agvdyn.trajectories.segments import Trajectory
 __all__ = ["experiment"]
 
 
-def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME) -> Trajectory:
+def experiment(name: str, geom: Geometry = PROTOTYPE, *, dt: float = SAMPLE_TIME, **options) -> Trajectory:
     """Built-in experiment by name (``identification``, ``lane-change``, ``lateral``, ``lifted-wheel``,
-    ``car-like``) or a trajectory file."""
+    ``car-like``, ``driving``) or a trajectory file. ``options``: keywords of ``driving``
+    (:func:`~agvdyn.trajectories.driving.driving_experiment`: ``duration``, ``floor``, ``seed``, ...)."""
     key = name.strip().lower().replace("_", "-")
+    if key == "driving":
+        return driving_experiment(geom, dt=dt, **options)
+    if options:
+        raise TrajectoryError(f"experiment {name!r} takes no options {sorted(options)}: only 'driving' does")
     if key == "identification":
         return identification_sequence(geom, dt=dt)
     if key == "lane-change":

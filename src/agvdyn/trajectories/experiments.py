@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering, steering_from_virtual
 from agvdyn.platform import PROTOTYPE, SAMPLE_TIME, Geometry
@@ -27,7 +26,7 @@ __all__ = ["default_excitation", "default_periods", "identification_sequence", "
            "lifted_wheel_experiment", "EXPERIMENTS"]
 
 #: Names of the built-in experiments of :func:`agvdyn.trajectories.catalog.experiment`.
-EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel", "car-like")
+EXPERIMENTS = ("identification", "lane-change", "lateral", "lifted-wheel", "car-like", "driving")
 
 
 # Steering: 6 harmonics of 8 s (0.8-4.7 rad/s), three periods, so that C_l alpha_ddot is not
@@ -118,6 +117,8 @@ def _lane_change_amplitude(offset: float, length: float) -> float:
     lateral = lambda A: np.trapezoid(np.sin(A * np.sin(np.pi * u) ** 4), u) * length - offset  # noqa: E731
     if abs(offset) >= 0.375 * length * 0.999:  # int sin^4 = 3/8: beyond it the heading would pass 90 deg
         raise TrajectoryError(f"lane change offset {offset} m over {length} m: expected |offset| < 0.375 * length")
+    from scipy.optimize import brentq  # here: scipy.optimize is ~0.3 s of start-up the other experiments never use
+
     return float(brentq(lateral, -math.pi / 2, math.pi / 2))
 
 

@@ -6,9 +6,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import yaml
-from scipy.interpolate import CubicSpline
+
+from agvdyn._lazy import pandas as pd  # trajectory files only: the built-in experiments need neither pandas
+# nor scipy.interpolate (imported where a file is read), ~0.4 s of every simulate's start-up
 
 from agvdyn.kinematics import (
     MODE_TOLERANCE,
@@ -100,6 +101,8 @@ def _read_csv_trajectory(path: Path, geom: Geometry, dt: float, tolerance: float
             coords = np.column_stack([virtual_from_steering(geom, alpha[a:b]), _csv_numbers(path, frame, "x_ch")[a:b]])
         else:
             coords = _csv_numbers(path, frame, _CSV_COORD[mode])[a:b, None]
+        from scipy.interpolate import CubicSpline
+
         spline = CubicSpline(tt, coords, axis=0)
         s, sd, sdd = spline(grid), spline(grid, 1), spline(grid, 2)
         if mode is Mode.PARKING:
