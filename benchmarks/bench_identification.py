@@ -44,7 +44,7 @@ from agvdyn.identification import (  # noqa: E402
     load_logs,
     log_equations,
 )
-from agvdyn.io import write_log  # noqa: E402
+from agvdyn.io import open_logs, write_log  # noqa: E402
 from agvdyn.kinematics import kinematic_model  # noqa: E402
 from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE  # noqa: E402
 from model_logs import identification_frame  # noqa: E402
@@ -126,9 +126,9 @@ def main() -> None:
         path = Path(tmp) / "ident.parquet"
         write_log(path, frame, {"platform": PROTOTYPE.to_dict()})
         settings = IdentificationSettings()
-        identify(path, settings=settings)  # warm-up (imports, numba compilation of the core)
+        identify(open_logs(path), settings=settings)  # warm-up (imports, numba compilation of the core)
         t0 = time.perf_counter()
-        ident = identify(path, settings=settings)
+        ident = identify(open_logs(path), settings=settings)
         total = time.perf_counter() - t0
         # stage timings
         t0 = time.perf_counter()

@@ -27,9 +27,10 @@ from pathlib import Path  # noqa: E402
 
 def worker(path: str) -> dict:
     from agvdyn.identification import identify
+    from agvdyn.io import open_logs
 
     t0 = time.perf_counter()
-    ident = identify(path, keep_blocks=False)
+    ident = identify(open_logs(path), keep_blocks=False)
     return {"samples": ident.n_samples, "seconds": time.perf_counter() - t0,
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "values": ident.parameters.to_vector().tolist()}

@@ -55,7 +55,9 @@ def worker(paths: list[str], mode: str, workers: int) -> dict:
 
     import agvdyn.identification.pipeline as pipeline
 
-    identify(paths[:2], keep_blocks=False, workers=workers)
+    from agvdyn.io import open_logs
+
+    identify(open_logs(paths[:2]), keep_blocks=False, workers=workers)
     regression = [0.0]
     fit = pipeline.fit_regression
 
@@ -69,7 +71,7 @@ def worker(paths: list[str], mode: str, workers: int) -> dict:
     pipeline.fit_regression = timed_fit
     t0, c0 = time.perf_counter(), time.process_time()
     if mode == "normal":
-        ident = identify(paths, keep_blocks=False, workers=workers)
+        ident = identify(open_logs(paths), keep_blocks=False, workers=workers)
     else:  # the row-stacked reference: all blocks in memory, one stacked regression
         settings = IdentificationSettings()
         logs = load_logs(paths)

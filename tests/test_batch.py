@@ -18,7 +18,8 @@ from typer.testing import CliRunner
 
 from agvdyn.batch import TABLE_COLUMNS, BatchJob, ManifestError, jobs_from_dict, read_manifest, run_batch
 from agvdyn.cli import app
-from agvdyn.identification import IdentificationSettings, identify
+from agvdyn.identification import IdentificationSettings, identify, platform_for
+from agvdyn.io import open_logs
 from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE, write_platform
 
 pytest.importorskip("distributed")
@@ -56,7 +57,8 @@ def fleet(tmp_path_factory) -> Path:
 
 def _alone(job: BatchJob):
     """identify() run alone on a job's inputs, the way a user would call it."""
-    return identify(list(job.logs), job.platform, fixed=job.fixed(),
+    logs = open_logs(list(job.logs), mapping=job.mapping, platform=job.platform)
+    return identify(logs, platform_for(logs, job.platform), fixed=job.fixed(),
                     settings=IdentificationSettings.from_flat(**{k: v for k, v in (("estimator", job.estimator),
                                                                          ("uncertainty", job.uncertainty)) if v}))
 

@@ -17,7 +17,7 @@ from agvdyn.identification import (
     fit_blocks,
     identify,
 )
-from agvdyn.io import Log, write_log
+from agvdyn.io import Log, open_logs, write_log
 from agvdyn.platform import PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE, read_parameters
 from model_logs import identification_frame
 
@@ -81,7 +81,7 @@ def test_whole_pipeline_on_noise_free_model_log(model_log):
     differences err by (w dt)^2 / 6 ~ 2e-6 relative; what is left are the edges of each run and
     the tanh columns near the stiction threshold. Observed: ~2e-6. 1e-4 leaves a margin of 50.
     """
-    ident = identify(model_log)  # platform from the sidecar
+    ident = identify(open_logs(model_log))  # platform from the sidecar
     assert _rel_error(ident).max() < 1e-4
     assert ident.sources == (str(model_log),)
     assert set(ident.std) == {PARAMETER_NAMES[i] for i in FREE}
@@ -93,8 +93,8 @@ def test_whole_pipeline_on_noise_free_model_log(model_log):
 
 def test_literal_filtering_is_biased_parallel_is_not(model_log):
     """The paper's literal variant smears the Coulomb steps of the torques only: measurable bias."""
-    parallel = identify(model_log, settings=IdentificationSettings.from_flat(filtering=Filtering.PARALLEL))
-    literal = identify(model_log, settings=IdentificationSettings.from_flat(filtering="literal"))
+    parallel = identify(open_logs(model_log), settings=IdentificationSettings.from_flat(filtering=Filtering.PARALLEL))
+    literal = identify(open_logs(model_log), settings=IdentificationSettings.from_flat(filtering="literal"))
     assert _rel_error(literal).max() > 20 * _rel_error(parallel).max()
     assert _rel_error(literal).max() > 1e-4
 
@@ -135,7 +135,7 @@ def test_rotation_alone_names_the_inertia_group():
 def test_B_w_free_without_car_like_motion_is_refused(model_log):
     """Sec. 6.3: steering, straight and rotation identify everything except B_w."""
     with pytest.raises(UnidentifiableError, match=r"\['B_w'\]") as info:
-        identify(model_log, fixed={})
+        identify(open_logs(model_log), fixed={})
     assert info.value.dependencies[0].combination_of  # named as a combination of other columns
 
 
@@ -168,7 +168,7 @@ def test_least_squares_statistics_against_direct_formula():
 
 def test_parameter_file_round_trip(model_log, tmp_path):
     """(d) YAML and JSON parameter files read back to the same values, std, fixed, condition number."""
-    ident = identify(model_log)
+    ident = identify(open_logs(model_log))
     for name in ("params.yaml", "params.json"):
         path = ident.write(tmp_path / name)
         back = read_parameters(path)
@@ -186,9 +186,9 @@ def test_parameter_file_round_trip(model_log, tmp_path):
 
 def test_bad_input_errors(model_log):
     with pytest.raises(ValueError, match="fixed parameter 'B_x'"):
-        identify(model_log, fixed={"B_x": 1.0})
+        identify(open_logs(model_log), fixed={"B_x": 1.0})
     with pytest.raises(ValueError, match=r"segments \['lateral'\] are not in the logs.*'rotation', 'steer_left'"):
-        identify(model_log, settings=IdentificationSettings.from_flat(segments=("lateral",)))
+        identify(open_logs(model_log), settings=IdentificationSettings.from_flat(segments=("lateral",)))
     with pytest.raises(ValueError, match=r"unknown segment names \['straigth'\]: expected some of \[.*'straight'"):
         IdentificationSettings.from_flat(segments=("straigth",))
     with pytest.raises(ValueError, match="stiction_threshold"):

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from agvdyn.cli import app
-from agvdyn.identification import identify
+from agvdyn.identification import experiment_of, identify, identify_lifted
 from agvdyn.identification.lifted import LiftedWheelIdentification, is_lifted, lifted_experiment
 from agvdyn.io import Log, read_log
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
@@ -63,7 +63,9 @@ def test_simulated_wheels_turn_without_ground_contact(run):
 
 
 def test_b_w_within_2_percent_of_the_truth(run):
-    result = identify(_log(run))
+    log = _log(run)
+    assert experiment_of([log]) == "lifted-wheel"
+    result = identify_lifted([log], PROTOTYPE)
     assert isinstance(result, LiftedWheelIdentification)
     assert result.B_w == pytest.approx(P.B_w, rel=0.02)
     assert result.values["d_vw"] == pytest.approx(P.d_vw, rel=0.02)
@@ -77,11 +79,20 @@ def test_recognised_from_the_label_or_told(run, tmp_path):
     assert is_lifted(log) and lifted_experiment([log], None)
     unlabelled = Log.from_frame(run.log_frame().drop(columns="segment"), sidecar=run.sidecar())
     assert not lifted_experiment([unlabelled], "auto")
-    told = identify(unlabelled, experiment="lifted-wheel")
+    assert experiment_of([unlabelled], "lifted-wheel") == "lifted-wheel"
+    told = identify_lifted([unlabelled], PROTOTYPE)
     assert told.B_w == pytest.approx(P.B_w, rel=0.02)
     ground = _log(simulate("lane-change", seed=1))
     with pytest.raises(ValueError, match="lifted-wheel logs .* and vehicle logs"):
+        experiment_of([log, ground])
+    with pytest.raises(ValueError, match="lifted-wheel logs .* and vehicle logs"):
         identify([log, ground])
+    with pytest.raises(ValueError, match="lifted-wheel logs .* and vehicle logs"):
+        identify([ground, log])  # found while the logs are read
+    with pytest.raises(ValueError, match="identify_lifted"):
+        identify(log)
+    with pytest.raises(ValueError, match="experiment 'jacks'"):
+        experiment_of([log], "jacks")
     with pytest.raises(ValueError, match="experiment 'jacks'"):
         identify(log, experiment="jacks")
 

@@ -15,7 +15,7 @@ from agvdyn.identification import IdentificationSettings, UnidentifiableError, f
 from agvdyn.identification.normal import RegressionData, RowIndex, RowStatistics, RowStore, RecordingRows
 from agvdyn.identification.rows import log_rows
 from agvdyn.identification.stretches import align_torque
-from agvdyn.io import Log, read_log, write_log
+from agvdyn.io import Log, open_logs, read_log, write_log
 from agvdyn.platform import PARAMETER_NAMES, PROTOTYPE
 from model_logs import identification_frame
 
@@ -150,19 +150,19 @@ def test_a_long_log_in_pieces_gives_the_whole_logs_answer(long_log, monkeypatch)
     assert chunks.is_long_log(long_log)
     pieces = list(chunks.log_pieces(long_log))
     assert sum(core.stop - core.start for _, core in pieces) == len(whole.rows.to_dict() and read_log(long_log).t)
-    chunked = identify(long_log, settings=settings, keep_blocks=False)
+    chunked = identify(open_logs(long_log), settings=settings, keep_blocks=False)
     assert chunked.n_samples == whole.n_samples and chunked.n_rows == whole.n_rows
     assert chunked.sources == (str(long_log),)
     np.testing.assert_allclose(_vector(chunked), _vector(whole), rtol=1e-9)
     # the jackknife's blocks are cut at multiples of the block length of the log's sample index: with
     # the same bandwidth, pieces and whole log have the same blocks and the same std
     fixed_band = settings.replace(bandwidth=600)
-    whole, chunked = identify(read_log(long_log), settings=fixed_band), identify(long_log, settings=fixed_band)
+    whole, chunked = identify(read_log(long_log), settings=fixed_band), identify(open_logs(long_log), settings=fixed_band)
     assert chunked.uncertainty.blocks == whole.uncertainty.blocks
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=1e-6)
     # HAC windows are cut where the pieces meet: the std may move a little, never much
     hac = settings.replace(uncertainty="hac")
-    whole, chunked = identify(read_log(long_log), settings=hac), identify(long_log, settings=hac)
+    whole, chunked = identify(read_log(long_log), settings=hac), identify(open_logs(long_log), settings=hac)
     np.testing.assert_allclose([chunked.std[n] for n in whole.std], [whole.std[n] for n in whole.std], rtol=0.05)
 
 
@@ -174,7 +174,7 @@ def test_a_long_csv_log_streams_in_pieces_too(long_log, tmp_path, monkeypatch):
     monkeypatch.setattr(chunks, "CHUNK_ROWS", 7000)
     assert chunks.is_long_log(csv, rows=100)
     monkeypatch.setattr(chunks, "is_long_log", lambda path, rows=None: True)
-    chunked = identify(csv, settings=settings, keep_blocks=False)
+    chunked = identify(open_logs(csv), settings=settings, keep_blocks=False)
     assert chunked.n_samples == whole.n_samples
     np.testing.assert_allclose(_vector(chunked), _vector(whole), rtol=1e-9)
 

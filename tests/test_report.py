@@ -62,7 +62,7 @@ def logs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def results(logs):
-    ident = identify(logs["ident"])
+    ident = identify(load_logs([logs["ident"]]))
     return ident, validate(logs["lane"], ident.parameters, PROTOTYPE)
 
 

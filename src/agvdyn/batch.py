@@ -194,11 +194,13 @@ def run_job(job: BatchJob) -> list[dict[str, Any]]:
     """Identify one job; rows of the batch table (one per parameter, or one carrying the error)."""
     t0 = time.perf_counter()
     try:
-        from agvdyn.identification import identify
+        from agvdyn.identification import identify, platform_for
+        from agvdyn.io import open_logs
         from agvdyn.platform import PARAMETER_NAMES
 
         settings = job.identification_settings()
-        ident = identify(list(job.logs), job.platform, fixed=job.fixed(), settings=settings, mapping=job.mapping,
+        logs = open_logs(list(job.logs), mapping=job.mapping, platform=job.platform)
+        ident = identify(logs, platform_for(logs, job.platform), fixed=job.fixed(), settings=settings,
                          keep_blocks=False, workers=1)  # one thread per Dask worker process
     except Exception as exc:  # noqa: BLE001 - a failed job is a row, never a failed batch
         return [_error_row(job, _message(exc), time.perf_counter() - t0)]

@@ -18,17 +18,15 @@ import numpy as np
 from agvdyn.identification import (
     DEFAULT_FIXED,
     EXCITATION,
-    OFFSET_NAMES,
     IdentificationSettings,
     LeastSquares,
     LogRows,
     dependent_parameters,
-    log_rows,
-    stacked_system,
+    row_passes,
     variance_inflation,
 )
-from agvdyn.identification.fit import COLLINEAR_RELATIVE_STD
-from agvdyn.identification.stretches import stretch_bounds
+from agvdyn.identification.excitation import COLLINEAR_RELATIVE_STD, ExcitationCheck
+from agvdyn.identification.fit import columns, estimate, normal_equations
 from agvdyn.io.summary import LogSummary, ModeRun, summarize_log
 from agvdyn.kinematics import Mode
 from agvdyn.platform import PARAMETER_NAMES, Geometry
@@ -236,23 +234,26 @@ def _timeline(t: np.ndarray, modes: np.ndarray, min_duration: float) -> tuple[tu
 
 def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: IdentificationSettings
                 ) -> list[Excitation]:
-    blocks = [b for r in rows for b in r.blocks]
-    A, y = stacked_system(blocks, offsets=settings.fit.torque_offsets)
-    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if settings.fit.torque_offsets else [])
-    free = [n for n in names if n not in fixed]
+    """How well the kept rows excite each parameter: the rank and variance inflation of the
+    identification's first step (:mod:`agvdyn.identification.excitation`) and the relative std of
+    an ordinary least-squares trial fit (its estimate step), on the rows' normal equations."""
+    names, free, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
     out = {n: Excitation(n, "fixed") for n in PARAMETER_NAMES if n in fixed}
-    if A.shape[0] <= len(free):
-        out.update({n: Excitation(n, "not excited") for n in free if n in PARAMETER_NAMES})
-        return [out[n] for n in PARAMETER_NAMES]
-    idx = [names.index(n) for n in free]
-    A1 = A[:, idx]
-    y1 = y - A[:, [names.index(n) for n in fixed]] @ np.array(list(fixed.values())) if fixed else y
-    missing = {d.name for d in dependent_parameters(A1, free, tolerance=settings.fit.rank_tolerance)}
-    keep = [i for i, n in enumerate(free) if n not in missing]
-    inflation = variance_inflation(A1[:, keep])
-    est = LeastSquares().fit(A1[:, keep], y1)
-    for j, i in enumerate(keep):
-        n = free[i]
+    data = normal_equations([b for r in rows for b in r.blocks], idx_free, p_fixed,
+                            offsets=settings.fit.torque_offsets)
+    try:
+        if data.n_rows <= len(free):
+            out.update({n: Excitation(n, "not excited") for n in free if n in PARAMETER_NAMES})
+            return [out[n] for n in PARAMETER_NAMES]
+        missing = {d.name for d in dependent_parameters(data.A, free, tolerance=settings.fit.rank_tolerance)}
+        keep = [n for n in free if n not in missing]
+        held = data.holding([free.index(n) for n in missing], np.zeros(len(missing)))
+        inflation = variance_inflation(held.A)
+        trial = estimate(ExcitationCheck(held, tuple(keep), {}, frozenset(), (), ()), LeastSquares(), settings)
+        est = trial.estimator
+    finally:
+        data.store.close()
+    for j, n in enumerate(keep):
         if n not in PARAMETER_NAMES:
             continue
         rel = float(est.std_[j] / abs(est.coef_[j])) if est.coef_[j] != 0 else math.inf
@@ -265,16 +266,20 @@ def _excitation(rows: Sequence[LogRows], fixed: Mapping[str, float], settings: I
 
 
 def preflight(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
-              settings: IdentificationSettings = IdentificationSettings(), min_duration: float = 0.05) -> Preflight:
-    """Check logs before identifying: per-file facts, excitation per parameter, verdict."""
-    files, all_rows, warnings = [], [], []
-    for log in logs:
-        rows = log_rows(log, geometry, settings)
-        all_rows.append(rows)
-        _, cuts = stretch_bounds(log.t, log.alpha, log.beta, settings)
+              settings: IdentificationSettings = IdentificationSettings(), min_duration: float = 0.05,
+              rows: Sequence[LogRows] | None = None) -> Preflight:
+    """Check logs before identifying: per-file facts, excitation per parameter, verdict.
+
+    ``rows``: the row passes of ``logs`` already made (:func:`agvdyn.identification.row_passes`,
+    shared with :func:`~agvdyn.identification.identify` by the report); else made here, once per log."""
+    if rows is not None and len(rows) != len(logs):
+        raise ValueError(f"rows: expected the row passes of the {len(logs)} logs, got {len(rows)}")
+    all_rows = list(rows) if rows is not None else row_passes(logs, geometry, settings)
+    files, warnings = [], []
+    for log, rows in zip(logs, all_rows):
         files.append(FileCheck(summarize_log(log, geometry, tolerance=settings.rows.mode_tolerance,
                                              min_duration=min_duration),
-                               rows, _timeline(log.t, rows.modes, min_duration), tuple(cuts),
+                               rows, _timeline(log.t, rows.modes, min_duration), rows.cuts,
                                _row_runs(log.t, rows.modes, log.sample_time)))
         c = rows.counts
         if rows.slip_events:

@@ -112,15 +112,27 @@ def _settings(*, filtering: str = D.FILTERING, cutoff: float = D.CUTOFF, order: 
         raise fail(str(exc)) from exc
 
 
-def _identified(logs, geometry, fixed, settings, experiment: Optional[str] = None, **options):
-    """identify(), with refusals for data quality as exit code 1 and bad input as exit code 2."""
-    from agvdyn.identification import ImplausibleError, UnidentifiableError, identify as identify_parameters
+def _identified(paths: list[Path], platform: Optional[Path], mapping: Optional[Path], fixed, settings,
+                experiment: str = "auto", **options):
+    """The logs opened (read one at a time, a long one in pieces: memory does not grow with their number
+    or length), then identify() or, for lifted-wheel logs, identify_lifted(); refusals for data quality
+    as exit code 1, bad input as exit code 2."""
+    from agvdyn.identification import (
+        ImplausibleError, UnidentifiableError, experiment_of, identify as identify_parameters, identify_lifted,
+        platform_for)
+    from agvdyn.io import open_logs
 
     try:
-        return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=experiment, **options)
+        logs = open_logs(paths, mapping=mapping, platform=platform)
+        geometry = platform_for(logs, platform)
+        if experiment_of(logs, experiment) == "lifted-wheel":
+            return identify_lifted([log.load() for log in logs], geometry, settings=settings)
+        return identify_parameters(logs, geometry, fixed=fixed, settings=settings,
+                                   experiment="auto" if str(experiment).strip().lower() == "auto" else "vehicle",
+                                   **options)
     except (UnidentifiableError, ImplausibleError) as exc:
         raise fail(f"refused: {exc}", code=1) from exc
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:
         raise fail(str(exc)) from exc
 
 
@@ -179,9 +191,7 @@ def identify(
                          torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
                          max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
                          uncertainty=uncertainty, bandwidth=bandwidth)
-    # logs are read one at a time inside identify(): memory does not grow with their number
-    ident = _identified(logs, platform, fixed, settings, experiment, mapping=mapping, keep_blocks=False,
-                        workers=threads)
+    ident = _identified(logs, platform, mapping, fixed, settings, experiment, keep_blocks=False, workers=threads)
     try:
         written = ident.write(out)
     except OSError as exc:

@@ -11,11 +11,14 @@ Row pipeline (paper sec. 6-7), one module per stage, data flowing one way::
     plausibility  negative masses, inertias, frictions refused with the likely sign mistake
     result      :class:`Identification`
 
-The entry point is :func:`identify`.
+The entry points are :func:`identify` (vehicle logs, loaded by :func:`agvdyn.io.load_logs` or
+opened by :func:`agvdyn.io.open_logs`) and :func:`identify_lifted` (the lifted-wheel test);
+:func:`experiment_of` tells which one a set of logs needs.
 """
 from agvdyn.identification.equations import EquationBlock, equation_block, generalized_velocity
 from agvdyn.identification.fit import fit_blocks, fit_regression
-from agvdyn.identification.pipeline import identify, load_logs, platform_for
+from agvdyn.identification.lifted import LiftedWheelIdentification, experiment_of, identify_lifted
+from agvdyn.identification.pipeline import identify, load_logs, platform_for, row_passes
 from agvdyn.identification.plausibility import ImplausibleError, SignConventionError
 from agvdyn.identification.regression import (
     Dependency,
@@ -53,4 +56,5 @@ __all__ = [
     "Dependency", "Estimator", "LeastSquares", "Identification", "SlipEvent", "RowCounts", "LogRows",
     "equation_block", "generalized_velocity", "log_equations", "log_rows", "row_modes", "stacked_system",
     "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "fit_regression", "load_logs", "platform_for",
+    "row_passes", "identify_lifted", "experiment_of", "LiftedWheelIdentification",
 ]

@@ -27,7 +27,7 @@ from agvdyn.determinacy import std_from_covariance
 from agvdyn.identifiability import triangular_factor
 
 __all__ = ["Estimator", "LeastSquares", "WeightedLeastSquares", "Robust", "Bounded", "ESTIMATORS", "make_estimator",
-           "column_norms", "PHYSICAL_BOUNDS"]
+           "column_norms", "condition_numbers", "scaled_condition", "PHYSICAL_BOUNDS"]
 
 #: Lower bounds of the physically consistent estimate (masses and inertias > 0, frictions >= 0).
 PHYSICAL_BOUNDS: Mapping[str, tuple[float, float]] = {
@@ -60,9 +60,21 @@ def _weighted_fit(A: np.ndarray, y: np.ndarray, w: np.ndarray | None):
     coef = scipy.linalg.solve_triangular(R, qty) / norms
     R_inv = scipy.linalg.solve_triangular(R, np.eye(n))
     bread = (R_inv @ R_inv.T) / np.outer(norms, norms)
+    return (coef, bread, *condition_numbers(R, norms))
+
+
+def condition_numbers(R: np.ndarray, norms: np.ndarray) -> tuple[float, float]:
+    """``cond(Theta_w^T Theta_w)`` of the column-scaled regressor (eq. 25) from its triangular factor
+    ``R`` (unit-norm columns), and the unscaled one (the columns' norms ``norms`` put back)."""
     sv = np.linalg.svd(R, compute_uv=False)
     sv_raw = np.linalg.svd(R * norms, compute_uv=False)
-    return coef, bread, float((sv[0] / sv[-1]) ** 2), float((sv_raw[0] / sv_raw[-1]) ** 2)
+    return float((sv[0] / sv[-1]) ** 2), float((sv_raw[0] / sv_raw[-1]) ** 2)
+
+
+def scaled_condition(A: np.ndarray) -> tuple[float, float]:
+    """:func:`condition_numbers` of the rows ``A`` (scaled to unit-norm columns, as the estimators do)."""
+    norms = column_norms(A)
+    return condition_numbers(triangular_factor(A / norms), norms)
 
 
 def _group_codes(groups: np.ndarray | None, m: int) -> np.ndarray:

@@ -15,7 +15,8 @@ settings. The friction without load is not the friction on the floor (wheel load
 flexing): it is reported, the vehicle's ``d_vw``, ``d_cw`` come from the identification sequence.
 
 A log is a lifted-wheel log when every labelled row carries the label ``lifted_wheel``, or when
-the caller says so (``identify(..., experiment="lifted-wheel")``).
+the caller says so (``experiment_of(logs, "lifted-wheel")``, ``agvdyn identify --experiment lifted-wheel``).
+:func:`identify_lifted` is the entry point, :func:`experiment_of` tells which one a set of logs needs.
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ from agvdyn.row_rules import row_mask
 from agvdyn.time_base import stamp_interval
 
 __all__ = ["LIFTED_LABEL", "EXPERIMENTS", "LIFTED_PARAMETERS", "LiftedWheelIdentification", "is_lifted",
-           "lifted_experiment", "identify_lifted"]
+           "lifted_experiment", "experiment_of", "mixed_experiments", "identify_lifted"]
 
 #: Segment label of the single-axis experiment.
 LIFTED_LABEL = "lifted_wheel"
@@ -69,11 +70,33 @@ def lifted_experiment(logs: Sequence[Any], experiment: str | None) -> bool:
         return key == "lifted-wheel"
     flags = [is_lifted(log) for log in logs]
     if any(flags) and not all(flags):
-        lifted = [log_source(x) for x, f in zip(logs, flags) if f]
-        ground = [log_source(x) for x, f in zip(logs, flags) if not f]
-        raise ValueError(f"lifted-wheel logs {lifted} and vehicle logs {ground} in one identification: identify the "
-                         "lifted-wheel log on its own and pass its B_w to the vehicle logs with --fix B_w=VALUE")
+        raise mixed_experiments([log_source(x) for x, f in zip(logs, flags) if f],
+                                [log_source(x) for x, f in zip(logs, flags) if not f])
     return bool(flags) and all(flags)
+
+
+def mixed_experiments(lifted: Sequence[str], ground: Sequence[str]) -> ValueError:
+    """The error for lifted-wheel logs and vehicle logs in one identification (their sources)."""
+    return ValueError(f"lifted-wheel logs {list(lifted)} and vehicle logs {list(ground)} in one identification: "
+                      "identify the lifted-wheel log on its own and pass its B_w to the vehicle logs with "
+                      "--fix B_w=VALUE")
+
+
+def experiment_of(logs: Sequence[Any], experiment: str | None = "auto") -> str:
+    """``"lifted-wheel"`` or ``"vehicle"``: which entry point identifies ``logs``
+    (:func:`identify_lifted` or :func:`agvdyn.identification.identify`), as ``agvdyn identify`` decides.
+
+    ``logs``: :class:`agvdyn.io.Log` or :class:`agvdyn.io.LogFile` (only the first one is read for an
+    explicit experiment or a vehicle log; every one when the first is lifted, to refuse a mix).
+    """
+    first = logs[0].first() if hasattr(logs[0], "first") else logs[0]
+    explicit = experiment is not None and str(experiment).strip().lower() != "auto"
+    if lifted_experiment([first], experiment) and (explicit or len(logs) == 1):
+        return "lifted-wheel"
+    if not explicit and is_lifted(first):
+        lifted_experiment([first] + [x.load() if hasattr(x, "load") else x for x in logs[1:]], experiment)
+        return "lifted-wheel"
+    return "vehicle"
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,5 +1,9 @@
-"""Entry point :func:`identify`: logs read one at a time (long ones in pieces) -> rows (stretches
-filtered once, rows classified) -> normal equations -> regression (:mod:`.fit`)."""
+"""Entry point :func:`identify`: loaded logs (:func:`agvdyn.io.load_logs`, or :func:`agvdyn.io.open_logs`
+whose files are read when used, a long one in pieces) -> the row pass of each log once
+(:func:`.rows.log_rows`, or the passes the caller already made) -> its rows reduced to normal
+equations (:mod:`.normal`) -> the regression steps (:mod:`.fit`). A refusal is diagnosed by
+streaming the logs again with sign hypotheses (:mod:`.plausibility`), one log at a time.
+"""
 from __future__ import annotations
 
 import dataclasses
@@ -7,90 +11,85 @@ import functools
 import math
 import os
 import threading
-from collections.abc import Iterator, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any, Union
 
 import numpy as np
 
+from agvdyn.identification._threads import default_workers, ordered_map
+from agvdyn.identification.account import LogRows, RowAccount
 from agvdyn.identification.fit import check_fixed, columns, fit_blocks, fit_regression
 from agvdyn.identification.normal import LogReduction, RowStatistics, RowStore, merge_reduction, reduce_blocks, regression_data
 from agvdyn.identification.plausibility import (
     ImplausibleError,
     diagnose_signs,
     encoder_sign_candidates,
-    overall_rms,
+    flipped,
     pick_sign_candidate,
 )
 from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
-from agvdyn.identification.rows import RowCounts, labels_present, log_rows
+from agvdyn.identification.rows import log_rows
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
-from agvdyn.identification._threads import default_workers, ordered_map
+from agvdyn.identification.stretches import log_source
 from agvdyn.identification.workspace import Workspace, keep_freed_memory
-from agvdyn.identification.slip import SlipEvent
-from agvdyn.identification.equations import EquationBlock
+from agvdyn.io import Log, LogFile, load_logs, sidecar_platform
 from agvdyn.platform import PROTOTYPE, Geometry, read_platform
 
-__all__ = ["identify", "fit_blocks", "load_logs", "platform_for"]
+__all__ = ["identify", "fit_blocks", "load_logs", "platform_for", "row_passes"]
+
+#: What :func:`identify` takes: logs in memory, or files read when used.
+LoadedLog = Union[Log, LogFile]
 
 
-def load_logs(logs: Any, *, mapping: Any = None, platform: Geometry | str | os.PathLike | None = None,
-              stop_tolerance: float | None = None) -> list[Any]:
-    """Logs as :class:`agvdyn.io.Log` objects: paths are loaded and checked with
-    ``agvdyn.io.load_log(path, mapping, platform)`` (mapping: for tables and bags not in our
-    schema), Log objects are passed through."""
-    from agvdyn.io import STOP_TOLERANCE, load_log
-
-    if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha"):
-        logs = [logs]
-    tol = STOP_TOLERANCE if stop_tolerance is None else stop_tolerance
-    out = [load_log(x, mapping, platform, stop_tolerance=tol) if isinstance(x, (str, os.PathLike)) else x for x in logs]
-    if not out:
-        raise ValueError("no logs given: expected at least one log")
-    return out
-
-
-def platform_for(logs: Sequence[Any], platform: Geometry | str | os.PathLike | None) -> Geometry:
-    """The geometry to use: the one given, else the ``platform`` of the first log's sidecar, else PROTOTYPE."""
-    from agvdyn.io import Log, sidecar_platform
-
+def platform_for(logs: Sequence[LoadedLog], platform: Geometry | str | None = None) -> Geometry:
+    """The geometry to use: the one given (a Geometry or a platform file), else the ``platform`` of
+    the first log's sidecar that has one, else PROTOTYPE."""
     if isinstance(platform, Geometry):
         return platform
     if platform is not None:
         return read_platform(platform)
     for log in logs:
-        if isinstance(log, Log) or getattr(log, "sidecar", None):  # a Log's sidecar is read on demand
-            found = sidecar_platform(log)
-            if found is not None:
-                return found
+        found = sidecar_platform(log.first() if isinstance(log, LogFile) else log)
+        if found is not None:
+            return found
     return PROTOTYPE
 
 
-def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
+def row_passes(logs: Sequence[Log], geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()
+               ) -> list[LogRows]:
+    """The row pass of each log in memory (:func:`.rows.log_rows`), blocks kept: what
+    :func:`identify`, :func:`agvdyn.preflight.preflight` and the report share (``rows=``)."""
+    return [log_rows(log, geometry, settings) for log in logs]
+
+
+def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = None, *,
              fixed: Mapping[str, float] = DEFAULT_FIXED,
              settings: IdentificationSettings = IdentificationSettings(),
-             estimator: Estimator | None = None, experiment: str | None = None, mapping: Any = None,
-             keep_blocks: bool = True, workers: int | None = None) -> Identification:
+             estimator: Estimator | None = None, experiment: str = "auto", keep_blocks: bool = True,
+             workers: int | None = None, rows: Sequence[LogRows] | None = None) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
 
-    Logs are read and reduced one at a time (their kept rows to normal equations, see
+    Logs are reduced one at a time (their kept rows to normal equations, see
     :mod:`agvdyn.identification.normal`): with ``keep_blocks=False`` memory does not grow with the
-    number of logs. Lifted-wheel logs (every labelled row ``lifted_wheel``, or
-    ``experiment="lifted-wheel"``) give B_w and the unloaded wheel friction instead: a
-    :class:`~agvdyn.identification.lifted.LiftedWheelIdentification`.
+    number of logs, nor, for files opened with :func:`agvdyn.io.open_logs`, with their length.
+    Lifted-wheel logs are identified by :func:`agvdyn.identification.lifted.identify_lifted`.
 
     Parameters
     ----------
-    logs : path, Log, or a sequence of them (paths are read with :func:`agvdyn.io.load_log`).
-    platform : Geometry or platform file; default the sidecar's platform, else the prototype.
+    logs : a :class:`agvdyn.io.Log` or :class:`agvdyn.io.LogFile`, or a sequence of them
+        (:func:`agvdyn.io.load_logs`, :func:`agvdyn.io.open_logs`).
+    platform : the Geometry; default the sidecar's platform, else the prototype.
     fixed : parameters taken as known (eq. 24), default ``{"B_w": 0.121}``.
     settings : :class:`IdentificationSettings`.
     estimator : an :class:`Estimator`, default the one ``settings.fit.estimator`` names.
-    experiment : ``"auto"``/None (from the labels), ``"vehicle"`` or ``"lifted-wheel"``.
-    mapping : mapping file or :class:`agvdyn.io.LogMapping` for logs not in our schema.
+    experiment : ``"auto"`` (lifted-wheel logs, by their labels, are refused: identify_lifted) or
+        ``"vehicle"`` (the labels are not looked at).
     keep_blocks : keep the equation blocks in the result (Fig. 5/6, residual plots, validation).
     workers : threads that read and reduce logs at once (default :func:`default_workers`: the cores, at most 2); the
         result does not depend on it (logs are merged in their order).
+    rows : the row passes of ``logs`` already made (:func:`row_passes`, logs in memory): they are
+        used instead of passing the logs again.
 
     The first call asks glibc to keep freed memory for reuse (:func:`.workspace.keep_freed_memory`).
 
@@ -106,163 +105,174 @@ def identify(logs: Any, platform: Geometry | str | os.PathLike | None = None, *,
     """
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ValueError(f"workers={workers!r}: expected an integer >= 1 (threads reading and reducing logs)")
+    items = _items(logs)
+    if platform is not None and not isinstance(platform, Geometry):
+        raise ValueError(f"platform={platform!r}: expected a Geometry (read a platform file with read_platform)")
+    if rows is not None and (len(rows) != len(items) or any(isinstance(x, LogFile) for x in items)):
+        raise ValueError(f"rows: expected the row passes of the {len(items)} logs in memory, got {len(rows)}")
     keep_freed_memory()
-    items = [logs] if isinstance(logs, (str, os.PathLike)) or hasattr(logs, "alpha") else list(logs)
+    geometry = platform if platform is not None else platform_for(items)
+    checked = _vehicle_logs(items, experiment)
+    jobs = _jobs(items, check_lifted=checked, rows=rows)
+    workers = default_workers() if workers is None else int(workers)
+    try:
+        return _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers)[0]
+    except (UnidentifiableError, ImplausibleError) as exc:
+        raise _diagnosis(exc, items, geometry, fixed, settings, estimator) from None
+
+
+def _items(logs: Any) -> list[LoadedLog]:
+    if isinstance(logs, (str, os.PathLike)):
+        raise ValueError(f"{str(logs)!r}: a path; identify takes loaded logs (agvdyn.io.load_logs, open_logs)")
+    items = [logs] if isinstance(logs, (Log, LogFile)) else list(logs)
     if not items:
         raise ValueError("no logs given: expected at least one log")
-    geometry_in = platform if isinstance(platform, Geometry) else None
-    load = (lambda x: x if hasattr(x, "alpha") else load_logs([x], mapping=mapping, platform=platform)[0])
-    pieces = None if mapping is not None else _pieces_of
-    first = next(iter(pieces(items[0]) or [(None, None)]))[0] if pieces else None
-    first = first if first is not None else load(items[0])
-    geometry = geometry_in if geometry_in is not None else platform_for([first], platform)
-    from agvdyn.identification.lifted import identify_lifted, is_lifted, lifted_experiment
-
-    explicit = experiment is not None and str(experiment).strip().lower() != "auto"
-    if lifted_experiment([first], experiment) and (explicit or len(items) == 1):
-        return identify_lifted([first] + [load(x) for x in items[1:]], geometry, settings=settings,
-                               estimator=estimator)
-    if not explicit and is_lifted(first):  # more logs: every one must be lifted, else the error of mixing them
-        loaded = [first] + [load(x) for x in items[1:]]
-        lifted_experiment(loaded, experiment)
-        return identify_lifted(loaded, geometry, settings=settings, estimator=estimator)
-    stream = _LogStream(items, load, first, lifted=None if explicit else is_lifted, pieces=pieces)
-    try:
-        return _identify_stream(stream, geometry, fixed, settings, estimator, keep_blocks,
-                                default_workers() if workers is None else int(workers))
-    except (UnidentifiableError, ImplausibleError) as exc:
-        loaded = [load(x) for x in items]
-        # the diagnosis compares values and residuals only: the classic covariance is enough
-        lenient = settings.replace(plausibility=False, uncertainty="classic")
-
-        def refit(flipped: Sequence[Any], checked: IdentificationSettings = lenient) -> Identification:
-            return _identify_stream(_LogStream(flipped), geometry, fixed, checked, estimator, True)
-
-        candidates = encoder_sign_candidates(loaded, geometry, settings)  # the rolling constraints tell first
-        if candidates:
-            raise pick_sign_candidate(loaded, candidates, refit) from None
-        if isinstance(exc, UnidentifiableError):
-            raise
-        unchecked = refit(loaded, lenient.replace(max_relative_std=math.inf))
-        cause, detail = diagnose_signs(loaded, refit, overall_rms(unchecked))
-        raise ImplausibleError(exc.implausible, cause, detail) from None
+    for x in items:
+        if not isinstance(x, (Log, LogFile)):
+            raise ValueError(f"{x!r}: expected a Log or LogFile (load paths with agvdyn.io.load_logs or open_logs)")
+    return items
 
 
-class _LogStream:
-    """The logs of one identification as ``(log, core)``, read one at a time (the first one already
-    read); a long log in our schema comes in pieces (:func:`agvdyn.io.chunks.log_pieces`, ``core``
-    its own rows), any other whole (``core`` None)."""
-
-    def __init__(self, items: Sequence[Any], load: Any = None, first: Any = None, lifted: Any = None,
-                 pieces: Any = None) -> None:
-        self.items, self.load, self.first, self.lifted = list(items), load or (lambda x: x), first, lifted
-        self.pieces = pieces
-
-    def __iter__(self):
-        for job in self.jobs():
-            yield job()
-
-    def jobs(self):
-        """One callable per log (or piece of a long log) that reads it and returns ``(log, core)``;
-        pieces are read here, in order (each needs its neighbour's rows), whole files by the callable."""
-        for k, item in enumerate(self.items):
-            if self.pieces is not None and not hasattr(item, "alpha") and self.pieces(item) is not None:
-                for piece in self.pieces(item):
-                    yield lambda piece=piece: piece
-                continue
-            yield functools.partial(self._whole, k, item)
-
-    def _whole(self, k: int, item: Any) -> tuple[Any, None]:
-        log = self.first if k == 0 and self.first is not None else self.load(item)
-        if self.lifted is not None and self.lifted(log):
-            from agvdyn.identification.lifted import lifted_experiment
-
-            lifted_experiment([self.first, log], None)  # raises: lifted and vehicle logs mixed
-        return log, None
+def _source(item: LoadedLog) -> str:
+    return str(item.path) if isinstance(item, LogFile) else log_source(item)
 
 
-def _reduced_logs(stream: _LogStream, geometry: Geometry, settings: IdentificationSettings, width: int,
-                  order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Any, Any, Any, LogReduction]]:
-    """``(log, core, rows, reduction)`` of every log of the stream, in order: read, filtered, rows
-    classified and reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a time
-    (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs ahead.
-    ``reuse``: the blocks are not wanted (``rows.blocks`` empty), each thread reuses its buffers."""
+def _head(item: LoadedLog) -> Log:
+    """The log, or the first piece (or whole log) of a file, not kept."""
+    return item.head() if isinstance(item, LogFile) else item
+
+
+def _vehicle_logs(items: Sequence[LoadedLog], experiment: str) -> bool:
+    """Whether the later logs are checked for lifted-wheel labels while they are read (``experiment="auto"``);
+    lifted-wheel logs given here are an error (mixed with vehicle logs: naming both)."""
+    from agvdyn.identification.lifted import is_lifted, lifted_experiment
+
+    key = str(experiment).strip().lower().replace("_", "-")
+    if key not in ("auto", "vehicle"):
+        lifted_experiment([], experiment)  # raises for an unknown name
+        raise ValueError(f"experiment {experiment!r}: lifted-wheel logs are identified by identify_lifted")
+    if key == "vehicle":
+        return False
+    first = items[0].first() if isinstance(items[0], LogFile) else items[0]
+    if is_lifted(first):
+        if len(items) > 1:
+            lifted_experiment([first] + [_head(x) for x in items[1:]], None)  # raises when mixed
+        raise ValueError(f"{getattr(first, 'path', None) or '<log>'} is a lifted-wheel log: identify it with "
+                         "agvdyn.identification.identify_lifted (agvdyn identify does so by itself)")
+    return True
+
+
+_Job = Callable[[], tuple[Log, Union[slice, None], Union[LogRows, None]]]
+
+
+def _jobs(items: Sequence[LoadedLog], *, check_lifted: bool = False, rows: Sequence[LogRows] | None = None,
+          flip: tuple[str, ...] = ()) -> Iterator[_Job]:
+    """One callable per log (or piece of a long file) that reads it and returns ``(log, core, rows)``
+    (``rows`` the pass already made, or None); pieces are read here, in order (each needs its
+    neighbour's rows), whole files by the callable. ``flip``: columns negated (sign hypotheses)."""
+    for k, item in enumerate(items):
+        if isinstance(item, LogFile) and item.long:
+            for log, core in item.pieces():
+                yield functools.partial(_piece, log, core, flip)
+            continue
+        first = _source(items[0]) if k > 0 and check_lifted else None
+        yield functools.partial(_whole, item, first, None if rows is None else rows[k], flip)
+
+
+def _piece(log: Log, core: slice, flip: tuple[str, ...]) -> tuple[Log, slice, None]:
+    return (flipped(log, flip) if flip else log), core, None
+
+
+def _whole(item: LoadedLog, first: str | None, rows: LogRows | None, flip: tuple[str, ...]
+           ) -> tuple[Log, None, LogRows | None]:
+    log = item.load() if isinstance(item, LogFile) else item
+    if first is not None:  # vehicle logs: a lifted-wheel one among them is an error
+        from agvdyn.identification.lifted import is_lifted, mixed_experiments
+
+        if is_lifted(log):
+            raise mixed_experiments([log_source(log)], [first])
+    return (flipped(log, flip) if flip else log), None, rows
+
+
+def _reduced_logs(jobs: Iterator[_Job], geometry: Geometry, settings: IdentificationSettings, width: int,
+                  order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Log, Any, LogRows, LogReduction]]:
+    """``(log, core, rows, reduction)`` of every log, in order: read, its row pass made (unless
+    given) and its rows reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a
+    time (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs
+    ahead. ``reuse``: the blocks are not wanted (``rows.blocks`` empty), each thread reuses its buffers."""
 
     local = threading.local()
 
-    def work(job):
-        log, core = job()
+    def work(job: _Job):
+        log, core, rows = job()
         space = None
-        if reuse:  # the blocks are dropped once reduced: the next log of this thread reuses the buffers
+        if reuse and rows is None:  # the blocks are dropped once reduced: the next log of this thread reuses the buffers
             space = local.__dict__.setdefault("workspace", Workspace())
-        rows = log_rows(log, geometry, settings, core, space)
+        if rows is None:
+            rows = log_rows(log, geometry, settings, core, space)
         reduction = reduce_blocks(rows.blocks, width, offsets=settings.fit.torque_offsets, columns=order,
                                   workspace=space)
         if reuse:
             rows = dataclasses.replace(rows, blocks=())
         return log, core, rows, reduction
 
-    yield from ordered_map(work, stream.jobs(), workers, "agvdyn-identify")
+    yield from ordered_map(work, jobs, workers, "agvdyn-identify")
 
 
-def _identify_stream(logs: _LogStream, geometry: Geometry, fixed: Mapping[str, float],
-                     settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool,
-                     workers: int = 1) -> Identification:
-    """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one regression."""
+def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, float],
+                settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool,
+                workers: int = 1) -> tuple[Identification, float]:
+    """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one
+    regression (:func:`.fit.fit_regression`); the identification and its residual RMS over all rows."""
     fixed = check_fixed(fixed)
     _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
     order = np.array(list(idx_free) + [i for i in range(len(p_fixed)) if i not in idx_free])  # free columns first
     stats, store, names = RowStatistics(len(p_fixed), columns=order), RowStore(columns=order), {}
-    blocks: list[EquationBlock] = []
-    notes: list[str] = []
-    counts = RowCounts()
-    events: list[SlipEvent] = []
-    thresholds: dict[str, float] = {}
-    sources: list[str] = []
-    labels: set[str] = set()
-    n_samples = 0
+    account = RowAccount()
     consumed = 0  # own rows of the earlier pieces of a long log: the sample index of this piece's first own row
     try:
-        for log, core, rows, reduction in _reduced_logs(logs, geometry, settings, len(p_fixed), order, workers,
+        for log, core, rows, reduction in _reduced_logs(jobs, geometry, settings, len(p_fixed), order, workers,
                                                         reuse=not keep_blocks):
             source = str(getattr(log, "path", None) or "<log>")
-            if core is not None and (not sources or sources[-1] != source):
+            if core is not None and (not account.sources or account.sources[-1] != source):
                 consumed = 0
-            offset = 0 if core is None else consumed - core.start  # piece steps -> the log's sample index
-            merge_reduction(reduction, stats, store, names, step_offset=offset)
+            merge_reduction(reduction, stats, store, names, step_offset=0 if core is None else consumed - core.start)
             if core is not None:
                 consumed += core.stop - core.start
-            if keep_blocks:
-                blocks += rows.blocks
-            notes += rows.notes
-            counts.add(rows.counts)
-            events += rows.slip_events
-            thresholds[rows.source] = rows.slip_threshold
-            if core is None or not sources or sources[-1] != source:  # pieces of one file: one source
-                sources.append(source)
-            labels |= labels_present(log)
-            n_samples += rows.counts.samples
-        _check_segments_present(labels, settings)
+            account.add(rows, source, piece=core is not None, keep_blocks=keep_blocks)
+        _check_segments_present(account.labels, settings)
         if not stats.n_rows:
             raise ValueError(
                 "no usable rows: the logs contain no samples in a motion mode of the model "
                 f"(segments used: {', '.join(settings.rows.segments) if settings.rows.segments else 'all'}; "
-                f"rows: {counts.to_dict()})")
+                f"rows: {account.counts.to_dict()})")
         data = regression_data(stats, names, idx_free, p_fixed, store)
-        return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, blocks=blocks,
-                              sources=sources, notes=notes, n_samples=n_samples, rows=counts, slip_events=events,
-                              slip_thresholds=thresholds, workers=workers)
+        ident = fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, account=account,
+                               workers=workers)
+        total = sum(ident.residual_rms.get(f"{s}:{c}", 0.0) ** 2 * n for (s, c), n in zip(data.keys, data.key_rows))
+        return ident, math.sqrt(total / data.n_rows)
     finally:
         store.close()
 
 
-def _pieces_of(item: Any):
-    """Pieces of a long log file in our schema (:func:`agvdyn.io.chunks.log_pieces`), None otherwise."""
-    from agvdyn.io.chunks import is_long_log, log_pieces
+def _diagnosis(exc: Exception, items: Sequence[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],
+               settings: IdentificationSettings, estimator: Estimator | None) -> Exception:
+    """The error to raise for a refusal: a sign mistake the encoders or the torques reveal, or
+    ``exc`` (with the likely cause, for an implausible estimate). Each hypothesis streams the logs
+    again, one at a time (the first piece of a long file for the encoders)."""
+    lenient = settings.replace(plausibility=False, uncertainty="classic")  # values and residuals only
 
-    if hasattr(item, "alpha") or not is_long_log(item):
-        return None
-    return log_pieces(item)
+    def refit(flip: tuple[str, ...], checked: IdentificationSettings = lenient) -> tuple[Identification, float]:
+        return _fit_stream(_jobs(items, flip=flip), geometry, fixed, checked, estimator, False)
+
+    candidates = encoder_sign_candidates((_head(x) for x in items), geometry, settings)  # the rolling constraints first
+    if candidates:
+        return pick_sign_candidate(candidates, lambda flip: refit(flip)[0])
+    if isinstance(exc, UnidentifiableError):
+        return exc
+    unchecked = refit((), lenient.replace(max_relative_std=math.inf))
+    cause, detail = diagnose_signs(refit, unchecked[1])
+    return ImplausibleError(exc.implausible, cause, detail)
 
 
 def _check_segments_present(present: set[str], settings: IdentificationSettings) -> None:

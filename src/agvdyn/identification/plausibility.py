@@ -9,18 +9,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-
-
 from agvdyn.platform import PARAMETER_UNITS
 
 __all__ = ["POSITIVE", "NON_NEGATIVE", "SIGN_HYPOTHESES", "Implausible", "ImplausibleError", "SignConventionError",
-           "implausible_parameters", "diagnose_signs", "encoder_sign_candidates", "pick_sign_candidate"]
+           "implausible_parameters", "diagnose_signs", "encoder_sign_candidates", "pick_sign_candidate", "flipped"]
+
+#: A fit of the same logs with the given columns negated (the caller streams them again).
+Refit = Callable[[tuple[str, ...]], Any]
 
 #: Encoder sign mistakes the rolling constraints reveal by themselves: (what, columns negated).
 ENCODER_HYPOTHESES: tuple[tuple[str, tuple[str, ...]], ...] = (
@@ -72,12 +73,13 @@ class ImplausibleError(ValueError):
         super().__init__(f"physically impossible estimates:\n  {lines}\n{detail}")
 
 
-def encoder_sign_candidates(logs: Sequence[Any], geometry: Any, settings: Any) -> list[tuple[str, tuple[str, ...], str]]:
+def encoder_sign_candidates(logs: Iterable[Any], geometry: Any, settings: Any) -> list[tuple[str, tuple[str, ...], str]]:
     """Encoder sign mistakes that make the wheels roll (eq. 1) where, as given, they slip everywhere:
     (what, columns, detail) for each hypothesis that brings the median slip speed of the moving rows
     below a fifth and below the slip floor. Kinematics cannot tell negating the left wheels from
     negating the right ones (the vehicle then drives backwards): the torques decide, see
-    :func:`pick_sign_candidate`. Uses the first continuous stretch of each log."""
+    :func:`pick_sign_candidate`. Uses the first continuous stretch of each log (``logs`` are read
+    one at a time, until one reveals a candidate; of a long log its first piece)."""
     from agvdyn.identification.stretches import filtered_stretch, stretch_bounds
 
     def median_slip(log: Any) -> float:
@@ -92,7 +94,7 @@ def encoder_sign_candidates(logs: Sequence[Any], geometry: Any, settings: Any) -
         if not given > settings.rows.slip_floor:
             continue
         for what, columns in ENCODER_HYPOTHESES:
-            fixed = median_slip(_flipped(log, columns))
+            fixed = median_slip(flipped(log, columns))
             if fixed < 0.2 * given and fixed < settings.rows.slip_floor:
                 out.append((what, columns, f"{getattr(log, 'path', None) or '<log>'}: the wheels slip by {given:.3g} m/s "
                                            f"(median of the moving rows) as the encoders are given, and roll "
@@ -102,12 +104,12 @@ def encoder_sign_candidates(logs: Sequence[Any], geometry: Any, settings: Any) -
     return out
 
 
-def pick_sign_candidate(logs: Sequence[Any], candidates: list[tuple[str, tuple[str, ...], str]],
-                        fit: Callable[[list[Any]], Any]) -> SignConventionError | None:
-    """The candidate under which the fit gives physically plausible parameters, as the error to raise."""
+def pick_sign_candidate(candidates: list[tuple[str, tuple[str, ...], str]], fit: Refit) -> SignConventionError | None:
+    """The candidate under which the fit gives physically plausible parameters, as the error to
+    raise; ``fit(columns) -> Identification`` of the logs with ``columns`` negated."""
     for what, columns, detail in candidates:
         try:
-            ident = fit([_flipped(log, columns) for log in logs])
+            ident = fit(columns)
         except ValueError:
             continue
         values = {n: getattr(ident.parameters, n) for n in (*POSITIVE, *NON_NEGATIVE) if n not in ident.fixed}
@@ -151,15 +153,16 @@ def implausible_parameters(values: dict[str, float], std: dict[str, float], *, s
     return refused, warnings
 
 
-def _flipped(log: Any, columns: tuple[str, ...]) -> Any:
+def flipped(log: Any, columns: tuple[str, ...]) -> Any:
+    """The log with ``columns`` negated (a copy of its frame)."""
     frame = log.frame.copy()
     frame[list(columns)] = -frame[list(columns)]
     return dataclasses.replace(log, frame=frame)
 
 
-def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residual: float
-                   ) -> tuple[str | None, str]:
-    """Try each sign hypothesis on the logs; ``fit(logs) -> Identification`` (plausibility off).
+def diagnose_signs(fit: Refit, residual: float) -> tuple[str | None, str]:
+    """Try each sign hypothesis on the logs; ``fit(columns) -> (Identification, residual RMS over
+    all rows)`` of the logs with ``columns`` negated (plausibility off).
 
     Returns (cause, message): among the hypotheses under which every estimate is physically
     plausible, the one with the smallest residual (RMS over all generalized torques; ``residual``
@@ -170,12 +173,11 @@ def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residua
     best: tuple[float, str, Any] | None = None
     for what, columns in SIGN_HYPOTHESES:
         try:
-            ident = fit([_flipped(log, columns) for log in logs])
+            ident, rms = fit(columns)
         except ValueError:
             continue
         values = {n: getattr(ident.parameters, n) for n in (*POSITIVE, *NON_NEGATIVE) if n not in ident.fixed}
         refused, _ = implausible_parameters(values, ident.std)
-        rms = overall_rms(ident)
         if not refused and (best is None or rms < best[0]):
             best = (rms, what, ident)
     if best is None:
@@ -188,16 +190,3 @@ def diagnose_signs(logs: Sequence[Any], fit: Callable[[list[Any]], Any], residua
                   f"C_ch = {p.C_ch:.5g} kg m^2, d_vw = {p.d_vw:.4g} N m s/rad, all physically plausible, with a "
                   f"residual RMS of {rms:.4g} N m (as given: {residual:.4g} N m). Fix the sign in the logger, or give 'sign: -1' for these "
                   "signals in the mapping file (docs/io.md).")
-
-
-def overall_rms(ident: Any) -> float:
-    """RMS of the residual over all kept equation rows of an identification."""
-    p = ident.parameters.to_vector()
-    total, count = 0.0, 0
-    for b in ident.blocks:
-        r = (b.torque - b.model_torque(p, ident.offset_vector))[b.keep]
-        total += float(r @ r)
-        count += r.size
-    return math.sqrt(total / count) if count else math.nan
-
-

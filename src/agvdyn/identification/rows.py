@@ -18,7 +18,7 @@ are dropped; stiction rows (sec. 7) and a guard around them and around mode chan
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -26,9 +26,10 @@ from agvdyn._lazy import pandas as pd
 
 from agvdyn.identification._kernels import stretch_modes, stretch_projection
 from agvdyn.io.schema import SEGMENTS, LazyFrame
+from agvdyn.identification.account import LogRows, RowCounts
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.settings import IdentificationSettings
-from agvdyn.identification.slip import SlipEvent, slip_rows, slip_threshold
+from agvdyn.identification.slip import slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretches_of
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering
@@ -45,51 +46,6 @@ __all__ = ["LABEL_MODES", "RowCounts", "LogRows", "row_modes", "log_rows", "log_
 LABEL_MODES: dict[str, tuple[Mode, ...]] = {name: tuple(Mode.from_label(m) for m in modes)
                                              for name, modes in label_modes().items()}
 NO_MODE = 0
-
-
-@dataclass
-class RowCounts:
-    """What happened to the samples of the logs (counts of samples, not of equation rows)."""
-
-    samples: int = 0
-    stretches: int = 0
-    edge: int = 0
-    too_short: int = 0
-    no_mode: int = 0
-    not_selected: int = 0
-    slip: int = 0
-    used: int = 0
-    per_mode: dict[str, int] = field(default_factory=dict)
-    label_mismatch: dict[str, int] = field(default_factory=dict)
-    clipped_stop: dict[str, int] = field(default_factory=dict)
-
-    def add(self, other: "RowCounts") -> None:
-        for key in ("samples", "stretches", "edge", "too_short", "no_mode", "not_selected", "slip", "used"):
-            setattr(self, key, getattr(self, key) + getattr(other, key))
-        for key in ("per_mode", "label_mismatch", "clipped_stop"):
-            mine = getattr(self, key)
-            for k, v in getattr(other, key).items():
-                mine[k] = mine.get(k, 0) + v
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"samples": self.samples, "stretches": self.stretches, "dropped_edge": self.edge,
-                "dropped_too_short": self.too_short, "dropped_no_mode": self.no_mode,
-                "dropped_not_selected": self.not_selected, "dropped_slip": self.slip, "used": self.used,
-                "per_mode": dict(self.per_mode), "label_mismatch": dict(self.label_mismatch),
-                "clipped_stop": dict(self.clipped_stop)}
-
-
-@dataclass(frozen=True, eq=False)
-class LogRows:
-    """The equation blocks of one log and the account of its rows."""
-
-    source: str
-    blocks: tuple[EquationBlock, ...]
-    counts: RowCounts
-    slip_events: tuple[SlipEvent, ...]
-    slip_threshold: float
-    notes: tuple[str, ...]
-    modes: np.ndarray  # (N,) mode per sample (0: no mode, or not filtered)
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,8 +157,10 @@ class _Labels:
 def labels_present(log: Any) -> set[str]:
     """The segment labels a log carries (empty without a segment column)."""
     labels = _Labels.of(log)
-    if labels is None:
-        return set()
+    return set() if labels is None else _present(labels)
+
+
+def _present(labels: _Labels) -> set[str]:
     counts = np.bincount(labels.codes, minlength=len(labels.names))
     return {n for n, c in zip(labels.names, counts) if c and n}
 
@@ -261,7 +219,10 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
 
 def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings(),
              core: slice | None = None, workspace: Workspace | None = None) -> LogRows:
-    """Equation blocks of a log: stretches filtered once, rows classified, slip and stiction dropped.
+    """The row pass of a log: stretches filtered once, rows classified, slip and stiction dropped,
+    the rows kept as equation blocks and their account (:class:`LogRows`). Every consumer
+    (:func:`~agvdyn.identification.identify`, :func:`agvdyn.preflight.preflight`, the report's
+    cuts) reads this one result: a log is passed once.
 
     ``core``: for a piece of a longer log (:func:`agvdyn.io.chunks.log_pieces`), the rows that are
     its own; the others (its neighbours' overlap) are filtered but neither used nor counted.
@@ -269,17 +230,45 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     until the next log that uses it (see :mod:`.workspace`).
     """
     source = log_source(log)
-    t, alpha, beta = log.t, log.alpha, log.beta
+    t = log.t
     labels = _Labels.of(log)
     own = np.ones(t.size, dtype=bool)
     if core is not None:
         own[:] = False
         own[core] = True
     counts = RowCounts(samples=int(own.sum()), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
-    bounds, notes, nominal = stretches_of(t, alpha, beta, settings, getattr(log, "sample_time", None))
-    notes = [f"{source}: {n}" for n in notes]
+    bounds, cuts, nominal = stretches_of(t, log.alpha, log.beta, settings, getattr(log, "sample_time", None))
+    notes = [f"{source}: {n}" for n in cuts]
+    stretches, modes = _classified_stretches(log, geometry, settings, bounds, nominal, own, counts, notes, workspace)
+    peaks = [row_max_abs(st.slip) for st, _ in stretches]
+    speeds = np.concatenate([p[(modes[st.rows] != NO_MODE) & ~st.edge] for p, (st, _) in zip(peaks, stretches)]
+                            or [np.zeros(0)])
+    threshold = slip_threshold(speeds, settings)
+    blocks, events = [], []
+    for k, (st, av) in enumerate(stretches):
+        drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(settings.rows.slip_guard / st.dt)),
+                                  peaks[k])
+        if core is not None:  # an event belongs to the piece where it starts
+            ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
+        events += ev
+        usable = _usable_rows(st, modes[st.rows], drop_slip, labels, settings, own[st.rows], counts)
+        blocks += _stretch_blocks(geometry, st, modes[st.rows], av, usable, labels, settings, f"{source}#{k}",
+                                  own[st.rows], workspace, f"#{k}")
+    gaps = tuple((float(t[b - 1]), float(t[c])) for (_, b), (c, _) in zip(bounds[:-1], bounds[1:]))
+    present = frozenset() if labels is None else frozenset(_present(labels))
+    return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes, tuple(cuts), gaps,
+                   present)
+
+
+def _classified_stretches(log: Any, geometry: Geometry, settings: IdentificationSettings,
+                          bounds: list[tuple[int, int]], nominal: float, own: np.ndarray, counts: RowCounts,
+                          notes: list[str], workspace: Workspace | None) -> tuple[list[tuple[Stretch, np.ndarray]],
+                                                                                  np.ndarray]:
+    """Each stretch long enough filtered once and its rows' modes (the others counted and noted):
+    ``[(stretch, virtual angle)]`` and the mode of every sample of the log (0: none)."""
+    source, size = log_source(log), log.t.size
     min_rows = min_stretch_rows(settings, nominal)
-    stretches, modes = [], np.zeros(t.size, dtype=np.int8)
+    stretches, modes = [], np.zeros(size, dtype=np.int8)
     for a, b in bounds:
         if b - a <= min_rows:
             counts.too_short += int(own[a:b].sum())
@@ -287,47 +276,40 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
         st = filtered_stretch(geometry, log, a, b, settings, workspace, f"#{len(stretches)}",
-                              nominal if (a, b) == (0, t.size) else None)  # one stretch: the log's median step
+                              nominal if (a, b) == (0, size) else None)  # one stretch: the log's median step
         mode, av = _modes_and_virtual_angle(geometry, st, settings)
         stretches.append((st, av))
         modes[a:b] = mode
     counts.stretches = len(stretches)
-    in_mode = [(st, av, modes[st.rows]) for st, av in stretches]
-    peaks = [row_max_abs(st.slip) for st, _ in stretches]
-    speeds = np.concatenate([p[(m != NO_MODE) & ~st.edge] for p, (st, _, m) in zip(peaks, in_mode)] or [np.zeros(0)])
-    threshold = slip_threshold(speeds, settings)
-    slip_guard = settings.rows.slip_guard
-    blocks, events = [], []
-    for k, (st, av, mode) in enumerate(in_mode):
-        drop_slip, ev = slip_rows(source, st.t, st.slip, threshold, int(round(slip_guard / st.dt)), peaks[k])
-        if core is not None:  # an event belongs to the piece where it starts
-            ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
-        events += ev
-        if settings.rows.segments is None:
-            selected = np.ones(st.n, dtype=bool)
-        else:
-            wanted = settings.rows.segments
-            selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(wanted, st.rows)
-        in_a_mode = mode != NO_MODE
-        mine = own[st.rows]  # the guards see the neighbours' rows; only the piece's own are used and counted
-        counts.edge += int(np.count_nonzero(st.edge & mine))
-        rest = ~st.edge
-        counts.no_mode += int(np.count_nonzero(rest & ~in_a_mode & mine))
-        rest &= in_a_mode
-        counts.not_selected += int(np.count_nonzero(rest & ~selected & mine))
-        rest &= selected
-        counts.slip += int(np.count_nonzero(rest & drop_slip & mine))
-        usable = rest & ~drop_slip
-        counts.used += int(np.count_nonzero(usable & mine))
-        for m, c in enumerate(np.bincount(mode[usable & mine], minlength=len(Mode) + 1).tolist()):
-            if c and m != NO_MODE:
-                label = Mode(m).label
-                counts.per_mode[label] = counts.per_mode.get(label, 0) + c
-        if labels is not None:
-            _count_mismatch(counts, labels, st.rows, mode)
-        blocks += _stretch_blocks(geometry, st, mode, av, usable, labels, settings, f"{source}#{k}", mine,
-                                  workspace, f"#{k}")
-    return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes)
+    return stretches, modes
+
+
+def _usable_rows(st: Stretch, mode: np.ndarray, drop_slip: np.ndarray, labels: _Labels | None,
+                 settings: IdentificationSettings, mine: np.ndarray, counts: RowCounts) -> np.ndarray:
+    """Rows of a stretch left for the equations (edges, no mode, unselected segments and slip
+    dropped), counted in ``counts`` (only the piece's own rows ``mine``; the guards see the others)."""
+    if settings.rows.segments is None:
+        selected = np.ones(st.n, dtype=bool)
+    else:
+        wanted = settings.rows.segments
+        selected = np.zeros(st.n, dtype=bool) if labels is None else labels.selected(wanted, st.rows)
+    in_a_mode = mode != NO_MODE
+    counts.edge += int(np.count_nonzero(st.edge & mine))
+    rest = ~st.edge
+    counts.no_mode += int(np.count_nonzero(rest & ~in_a_mode & mine))
+    rest &= in_a_mode
+    counts.not_selected += int(np.count_nonzero(rest & ~selected & mine))
+    rest &= selected
+    counts.slip += int(np.count_nonzero(rest & drop_slip & mine))
+    usable = rest & ~drop_slip
+    counts.used += int(np.count_nonzero(usable & mine))
+    for m, c in enumerate(np.bincount(mode[usable & mine], minlength=len(Mode) + 1).tolist()):
+        if c and m != NO_MODE:
+            label = Mode(m).label
+            counts.per_mode[label] = counts.per_mode.get(label, 0) + c
+    if labels is not None:
+        _count_mismatch(counts, labels, st.rows, mode)
+    return usable
 
 
 def log_equations(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()

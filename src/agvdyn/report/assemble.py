@@ -25,10 +25,11 @@ from agvdyn.identification import (
     Identification,
     IdentificationSettings,
     ImplausibleError,
+    LogRows,
     UnidentifiableError,
     identify,
+    row_passes,
 )
-from agvdyn.identification.stretches import stretch_bounds
 from agvdyn.io.log import sidecar_path
 from agvdyn.platform import PARAMETER_UNITS, Geometry
 from agvdyn.preflight import Preflight, preflight
@@ -255,14 +256,9 @@ def verdict_of(identification: Identification | None, refusal: Exception | None 
     return Verdict(Outcome.WARNINGS if reasons else Outcome.IDENTIFIED, summary + ".", tuple(reasons))
 
 
-def _cuts(logs: Sequence[Any], settings: IdentificationSettings) -> tuple[tuple[tuple[float, float], ...], ...]:
-    """Per log the time intervals between its continuous stretches (dropouts, joined recordings)."""
-    out = []
-    for log in logs:
-        bounds, _ = stretch_bounds(log.t, log.alpha, log.beta, settings)
-        t = log.t
-        out.append(tuple((float(t[b - 1]), float(t[c])) for (_, b), (c, _) in zip(bounds[:-1], bounds[1:])))
-    return tuple(out)
+def _cuts(rows: Sequence[LogRows]) -> tuple[tuple[tuple[float, float], ...], ...]:
+    """Per log the time intervals between its continuous stretches (dropouts, joined recordings), from its row pass."""
+    return tuple(r.gaps for r in rows)
 
 
 def _files(logs: Sequence[Any], role: str) -> list[InputFile]:
@@ -323,11 +319,12 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
     from agvdyn.validation import validate
 
     ident, refusal, val = None, None, None
+    rows = row_passes(logs, geometry, settings)  # the row pass of each log, once: identify, pre-flight, cuts
     try:
-        ident = identify(logs, geometry, fixed=fixed, settings=settings)
+        ident = identify(logs, geometry, fixed=fixed, settings=settings, rows=rows)
     except (UnidentifiableError, ImplausibleError) as exc:
         refusal = exc
-    checked = preflight(logs, geometry, fixed=fixed, settings=settings)
+    checked = preflight(logs, geometry, fixed=fixed, settings=settings, rows=rows)
     if ident is not None and validation_log is not None:
         val = validate(validation_log, ident.parameters, geometry, settings=settings)
     ref = choose_reference(logs, geometry, reference)
@@ -338,7 +335,7 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
         extra.setdefault("plan", excitation.file.path)
     prov = _provenance(logs, [] if validation_log is None else [validation_log], geometry,
                        _settings_dict(fixed, settings), extra, command)
-    return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(logs, settings), title,
+    return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(rows), title,
                   excitation, plan_notes)
 
 
@@ -365,7 +362,7 @@ def report_of(identification: Identification, validation: Any = None, *, referen
     geometry, settings = identification.geometry, identification.settings
     fixed = {n: getattr(identification.parameters, n) for n in identification.fixed}
     logs = list(logs)
-    if checked is None and logs:
+    if checked is None and logs:  # the row pass of each log, once: pre-flight and cuts
         checked = preflight(logs, geometry, fixed=fixed, settings=settings)
     verdict = verdict_of(identification, None, validation, reference, checked, max_nrmse=max_nrmse)
     extra = dict(extra_files or {})
@@ -377,7 +374,7 @@ def report_of(identification: Identification, validation: Any = None, *, referen
         extra.setdefault("plan", excitation.file.path)
     prov = _provenance(logs, validation_logs, geometry, _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, identification, None, validation, checked, reference,
-                  _cuts(logs, settings) if logs else (), title, excitation, plan_notes)
+                  _cuts([f.rows for f in checked.files]) if logs else (), title, excitation, plan_notes)
 
 
 def command_line() -> str:
