@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn.determinacy import std_from_covariance
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.platform import PARAMETER_NAMES
 
@@ -163,7 +164,7 @@ def parameter_change(blocks: Sequence[EquationBlock], parameters: np.ndarray, *,
         stat = np.einsum("mi,mij,mj->m", b, inv, b)
         k = int(np.argmax(stat))
         delta = inv[k] @ b[k]
-        std = np.sqrt(np.maximum(np.diag(inv[k]), 0.0))
+        std = std_from_covariance(inv[k], list(_TRACKED))[0]  # a negative variance is inf, never 0
         big = np.abs(delta) >= min_relative * np.abs(p[cols])
         if stat[k] > threshold and big.any():
             found.append(ParameterChange(name, float(grid[k]), float(stat[k]), threshold,
