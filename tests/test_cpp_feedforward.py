@@ -299,3 +299,139 @@ def test_example_control_loop_reproduces_a_feedforward_table(tmp_path, params_fi
     scale = np.abs(reference[TORQUES].to_numpy()).max()
     assert np.abs(out[TORQUES].to_numpy() - reference[TORQUES].to_numpy()).max() < 1e-4 * scale
     assert math.isclose(out["t"].iloc[-1], reference["t"].iloc[-1], abs_tol=1e-6)
+
+
+# --- the payload tracker (agvdyn_ff::PayloadTracker against agvdyn.online.tracker) --------------------
+
+TRACKER_VECTORS = ROOT / "cpp" / "tests" / "tracker_vectors.json"
+TRACKER_OUTPUTS = ["m_ch", "C_ch", "m_ch_std", "C_ch_std", "nis"]
+
+
+@pytest.fixture(scope="module")
+def tracker_vectors() -> tuple[dict, pd.DataFrame]:
+    data = json.loads(TRACKER_VECTORS.read_text(encoding="utf-8"))
+    return data, pd.read_csv(TRACKER_VECTORS.parent / data["sequence"])
+
+
+def _tracker_logs(table: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    return [(g["kind"].to_numpy(np.int64), np.ascontiguousarray(g[["phi_m", "phi_C"]].to_numpy()),
+             np.ascontiguousarray(g["z"].to_numpy())) for _, g in table.groupby("log", sort=True)]
+
+
+def _relative(actual: np.ndarray, reference: np.ndarray) -> float:
+    """Largest |x - ref| / max(|ref|, 1) (the vectors' rule); NaN exactly where the reference has NaN."""
+    actual, reference = np.asarray(actual, dtype=float), np.asarray(reference, dtype=float)
+    assert np.array_equal(np.isnan(actual), np.isnan(reference))
+    ok = ~np.isnan(reference)
+    return float(np.max(np.abs(actual[ok] - reference[ok]) / np.maximum(np.abs(reference[ok]), 1.0), initial=0.0))
+
+
+def test_tracker_vectors_are_current(tracker_vectors):
+    """The stored outputs are what the Python tracker computes now on the stored rows."""
+    data, table = tracker_vectors
+    generator = _load_generator()
+    outputs, events, final = generator.run_python_tracker(_tracker_logs(table), data["dt"], data["nominal"],
+                                                          data["nominal_std"])
+    assert len(table) == sum(data["logs"]) >= 5000 and table["log"].nunique() == len(data["logs"])
+    assert _relative(outputs[:, :5], table[TRACKER_OUTPUTS].to_numpy()) < 1e-12, \
+        "regenerate with `.venv/bin/python cpp/tests/make_vectors.py --tracker`"
+    assert np.array_equal(outputs[:, 5], table["event"].to_numpy())
+    assert [(e["log"], e["sample"], e["start"], e["parameter"], e["sign"]) for e in events] == \
+        [(e["log"], e["sample"], e["start"], e["parameter"], e["sign"]) for e in data["events"]]
+    assert {(e["parameter"], e["sign"]) for e in events} == {(0, 1), (0, -1), (1, 1)}  # steps of both kinds and signs
+    for key in ("theta", "P", "R", "n_rows", "g"):
+        assert _relative(final[key], data["final"][key]) < 1e-12, key
+
+
+def test_cpp_tracker_meets_the_vectors(tracker_vectors):
+    """Every output of every sample, the events and the final state through the extension: 1e-9 relative."""
+    data, table = tracker_vectors
+    core = ffcpp.extension()
+    tracker = core.PayloadTracker(tuple(data["nominal"]), tuple(data["nominal_std"]), data["dt"], data["settings"])
+    parts, events = [], []
+    for index, (kind, phi, z) in enumerate(_tracker_logs(table)):
+        if index:
+            tracker.begin_log()
+        n = kind.size
+        theta, var, nis, flag = np.zeros((n, 8)), np.zeros((n, 8)), np.zeros(n), np.zeros(n, dtype=np.int64)
+        status, row, found = tracker.run(kind, phi, z, theta, var, nis, flag)
+        assert row == -1, core.status_name(status)
+        parts.append(np.column_stack([theta[:, :2], np.sqrt(var[:, :2]), nis, flag]))
+        events += [(index, *e) for e in found]
+    outputs = np.concatenate(parts)
+    worst = _relative(outputs[:, :5], table[TRACKER_OUTPUTS].to_numpy())
+    assert worst <= data["tolerance"]["relative"]
+    assert np.array_equal(outputs[:, 5], table["event"].to_numpy())
+    assert [(e[0], e[1], e[2], e[3], e[4]) for e in events] == \
+        [(e["log"], e["sample"], e["start"], e["parameter"], e["sign"]) for e in data["events"]]
+    for e, ref in zip(events, data["events"]):
+        worst = max(worst, _relative(e[5:], [ref["before"], ref["before_var"], ref["after"], ref["after_var"]]))
+    state = [np.zeros(8), np.zeros((8, 8)), np.zeros(3), np.zeros(9), np.zeros((2, 2)), np.zeros((2, 2, 8, 8)),
+             np.zeros((2, 2, 8)), np.zeros((2, 2))]
+    tracker.store_state(*state)
+    for key, value in zip(("theta", "P", "R", "n_rows", "g", "start"), state[:5] + state[7:]):
+        worst = max(worst, _relative(np.ravel(value), data["final"][key]))
+    assert worst <= data["tolerance"]["relative"]
+    print(f"tracker vectors: {len(table)} samples, {len(events)} events, largest relative deviation {worst:.3g}")
+
+
+def test_cpp_tracker_single_updates_and_refusals():
+    core = ffcpp.extension()
+    tracker = core.PayloadTracker((842.0, 286.0), (1.0, 1.0), 0.002, {})
+    status, estimate, std, nis, event = tracker.update(1, 0.3, 0.01, 0.3 * 842.0 + 0.01 * 286.0)
+    assert status == 0 and event == 0 and nis < 1e-9 and std[0] < 842.0 * 0.02 + 1e-9
+    status, estimate, _, nis, _ = tracker.update(9, 0.3, 0.0, 1.0)
+    assert core.status_name(status) == "unknown_row_kind" and math.isnan(nis)
+    assert core.status_name(tracker.update(5, math.nan, 0.2, 1.0)[0]) == "non_finite_input"
+    with pytest.raises(ValueError, match="invalid_model"):
+        core.PayloadTracker((842.0, 286.0), (1.0, 1.0), 0.002, {"threshold": -1.0})
+    with pytest.raises(ValueError, match="unknown"):
+        core.PayloadTracker((842.0, 286.0), (1.0, 1.0), 0.002, {"thresh": 1.0})
+
+
+@pytest.fixture(scope="module")
+def payload_drive(tmp_path_factory) -> Path:
+    """60 s of `driving` (seed 1) with a pick-up of 200 kg at 40 s."""
+    out = tmp_path_factory.mktemp("track") / "drive.parquet"
+    result = runner.invoke(app, ["simulate", "driving", "--duration", "60", "--seed", "1", "--payload", "40:200",
+                                 "--quiet", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_track_engines_agree_on_a_payload_step(tmp_path, payload_drive):
+    """`agvdyn track --engine cpp` against `--engine python`: every row of the table and every event."""
+    params = ROOT / "cpp" / "tests" / "data" / "params.yaml"
+    tables, summaries = {}, {}
+    for engine in ("python", "cpp"):
+        out = tmp_path / f"track_{engine}.parquet"
+        result = runner.invoke(app, ["track", str(payload_drive), "--params", str(params), "--out", str(out), "--rate",
+                                     "50", "--json", "--engine", engine])
+        assert result.exit_code == 0, result.output
+        tables[engine], summaries[engine] = pd.read_parquet(out), json.loads(result.stdout)
+    python, cpp = tables["python"], tables["cpp"]
+    assert len(python) == len(cpp) > 2000
+    assert np.array_equal(python["event"], cpp["event"])
+    columns = ["t", "m_ch", "m_ch_std", "C_ch", "C_ch_std", "nis"]
+    assert _relative(cpp[columns].to_numpy(), python[columns].to_numpy()) <= RELATIVE
+    events = summaries["python"]["events"]
+    assert [e["parameter"] for e in events][:1] == ["m_ch"] and 40.0 < events[0]["t_detected"] < 60.0
+    for e, f in zip(events, summaries["cpp"]["events"], strict=True):
+        assert (e["parameter"], e["sign"], e["t_detected"], e["t_change_estimate"]) == \
+               (f["parameter"], f["sign"], f["t_detected"], f["t_change_estimate"])
+        assert math.isclose(e["after"]["value"], f["after"]["value"], rel_tol=RELATIVE)
+    for name in ("m_ch", "C_ch"):
+        assert math.isclose(summaries["python"]["final"][name]["value"], summaries["cpp"]["final"][name]["value"],
+                            rel_tol=RELATIVE)
+    assert abs(summaries["cpp"]["final"]["m_ch"]["value"] - (842.0684 + 200.0)) < 0.02 * 1042.0
+
+
+def test_track_engine_cpp_names_a_missing_extension(tmp_path, payload_drive, monkeypatch):
+    def missing():
+        raise ffcpp.CppEngineUnavailable("the C++ feed-forward engine is not available: test")
+
+    monkeypatch.setattr(ffcpp, "extension", missing)
+    result = runner.invoke(app, ["track", str(payload_drive), "--params", str(ROOT / "cpp" / "tests" / "data" / "params.yaml"),
+                                 "--out", str(tmp_path / "t.csv"), "--engine", "cpp"])
+    assert result.exit_code == 2 and "not available" in result.stderr
+    assert not (tmp_path / "t.csv").exists()

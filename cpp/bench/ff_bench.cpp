@@ -1,10 +1,14 @@
-// ff_bench: time of one Model::feedforward call per motion mode.
+// ff_bench: time of one Model::feedforward call per motion mode, and of one PayloadTracker::update.
 //
 // For each mode, 1024 random valid setpoints (prototype geometry, Table 2 parameters) are cycled
 // through; each of 7 repeats times about 0.1 s of calls; the median repeat is printed as one JSON
 // line {"mode": "2", "ns_per_call": ...}. Target: <= 1000 ns per call.
-//   ff_bench [--seconds S]   (time per repeat, default 0.1)
+// Mode "track": PayloadTracker::update on 16384 rows of the tracker's model (every kind of row, a
+// payload step and a drop, so that CUSUM windows, detections and resets are part of the time), the
+// tracker running on through the repeats; {"mode": "track", "ns_per_call": ...}. Target: <= 10 us.
+//   ff_bench [--seconds S] [--mode 1|2|3|4|2s|track]   (time per repeat, default 0.1; one mode only)
 #include <agvdyn_ff/feedforward.hpp>
+#include <agvdyn_ff/tracker.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -17,10 +21,82 @@
 
 namespace ff = agvdyn::ff;
 
+namespace {
+
+// Median time per call (ns) of run(calls) over 7 repeats of about `seconds` each.
+template <typename Run>
+double time_per_call(Run&& run, std::size_t first, double seconds) {
+  using clock = std::chrono::steady_clock;
+  std::size_t calls = first;  // calibrate the number of calls per repeat
+  while (true) {
+    const auto t0 = clock::now();
+    run(calls);
+    const double dt = std::chrono::duration<double>(clock::now() - t0).count();
+    if (dt > seconds / 4 || calls > (std::size_t{1} << 32)) {
+      calls = static_cast<std::size_t>(calls * seconds / std::max(dt, 1e-9)) + 1;
+      break;
+    }
+    calls *= 4;
+  }
+  std::vector<double> per_call;
+  for (int repeat = 0; repeat < 7; ++repeat) {
+    const auto t0 = clock::now();
+    run(calls);
+    const double dt = std::chrono::duration<double>(clock::now() - t0).count();
+    per_call.push_back(dt * 1e9 / static_cast<double>(calls));
+  }
+  std::sort(per_call.begin(), per_call.end());
+  return per_call[per_call.size() / 2];
+}
+
+int bench_tracker(double seconds) {
+  const ff::Parameters p = ff::Parameters::paper();
+  ff::PayloadTracker tracker;
+  if (ff::PayloadTracker::create(ff::Vector2(p.m_ch, p.C_ch), ff::Vector2(1.0, 1.2), 0.002, ff::TrackerSettings{},
+                                 &tracker) != ff::Status::ok) {
+    return 2;
+  }
+  // rows of z = phi_m m + phi_C C + bias + noise in runs of 512 rows per kind (one in 16 without a row)
+  constexpr std::size_t n = 16384;
+  std::vector<ff::TrackerRow> rows(n);
+  std::mt19937_64 rng(2);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const double pi = 3.14159265358979323846;
+  for (std::size_t k = 0; k < n; ++k) {
+    const int kind = 1 + static_cast<int>((k / 512) % 6);
+    const double wave = std::sin(2 * pi * static_cast<double>(k) / 400.0);
+    const double m = p.m_ch + (k >= n / 2 ? 300.0 : 0.0), C = p.C_ch + (k >= n / 2 ? 60.0 : 0.0);
+    ff::TrackerRow& r = rows[k];
+    r.kind = k % 16 == 15 ? ff::RowKind::none : static_cast<ff::RowKind>(kind);
+    r.phi_m = kind <= 4 ? 0.4 * wave : 0.0;
+    r.phi_C = kind >= 5 ? 1.0 * wave : 0.05 * wave;
+    r.z = r.phi_m * m + r.phi_C * C + 0.5 * kind + noise(rng);
+  }
+  ff::TrackerOutput out;
+  double sink = 0;
+  long bad = 0;
+  auto run = [&](std::size_t calls) {
+    for (std::size_t c = 0; c < calls; ++c) {
+      bad += tracker.update(rows[c % n], out) != ff::Status::ok;
+      sink += out.estimate[0];
+    }
+  };
+  const double ns = time_per_call(run, n, seconds);
+  if (bad) return 3;
+  std::printf("{\"mode\": \"track\", \"ns_per_call\": %.1f, \"events\": %lld}\n", ns,
+              static_cast<long long>(tracker.event_count()));
+  if (sink == 12345.678) std::printf("\n");  // keep the results alive
+  return 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   double seconds = 0.1;
+  const char* only = nullptr;
   for (int k = 1; k < argc; ++k) {
     if (std::strcmp(argv[k], "--seconds") == 0 && k + 1 < argc) seconds = std::atof(argv[++k]);
+    else if (std::strcmp(argv[k], "--mode") == 0 && k + 1 < argc) only = argv[++k];
   }
   ff::Model model;
   const ff::Geometry g{};
@@ -33,6 +109,7 @@ int main(int argc, char** argv) {
                             ff::Mode::straight};
   constexpr std::size_t n = 1024;
   for (ff::Mode mode : modes) {
+    if (only != nullptr && std::strcmp(only, ff::label(mode)) != 0) continue;
     std::vector<ff::Setpoint> inputs(n);
     for (auto& sp : inputs) {
       sp.mode = mode;
@@ -58,29 +135,10 @@ int main(int argc, char** argv) {
         sink += u[c & 3];
       }
     };
-    using clock = std::chrono::steady_clock;
-    // calibrate the number of calls per repeat
-    std::size_t calls = n;
-    while (true) {
-      const auto t0 = clock::now();
-      run(calls);
-      const double dt = std::chrono::duration<double>(clock::now() - t0).count();
-      if (dt > seconds / 4 || calls > (std::size_t{1} << 32)) {
-        calls = static_cast<std::size_t>(calls * seconds / std::max(dt, 1e-9)) + 1;
-        break;
-      }
-      calls *= 4;
-    }
-    std::vector<double> per_call;
-    for (int repeat = 0; repeat < 7; ++repeat) {
-      const auto t0 = clock::now();
-      run(calls);
-      const double dt = std::chrono::duration<double>(clock::now() - t0).count();
-      per_call.push_back(dt * 1e9 / static_cast<double>(calls));
-    }
-    std::sort(per_call.begin(), per_call.end());
-    std::printf("{\"mode\": \"%s\", \"ns_per_call\": %.1f}\n", ff::label(mode), per_call[per_call.size() / 2]);
+    const double ns = time_per_call(run, n, seconds);
+    std::printf("{\"mode\": \"%s\", \"ns_per_call\": %.1f}\n", ff::label(mode), ns);
     if (sink == 12345.678) std::printf("\n");  // keep the results alive
   }
+  if (only == nullptr || std::strcmp(only, "track") == 0) return bench_tracker(seconds);
   return 0;
 }

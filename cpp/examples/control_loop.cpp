@@ -1,7 +1,7 @@
 // Example: a 500 Hz feed-forward loop with agvdyn_ff.
 //
 //   control_loop PARAMS.yaml FEEDFORWARD.csv [--platform PLATFORM.yaml] [--rate HZ] [--free-run]
-//                [--quiet] [--check TOL]
+//                [--quiet] [--check TOL] [--track ROWS.csv]
 //
 // PARAMS: a parameter file of `agvdyn identify` (YAML or JSON; its `platform` is the vehicle).
 // FEEDFORWARD.csv: a table of `agvdyn feedforward` (one row per 2 ms: t, segment, mode, alpha_l,
@@ -14,8 +14,18 @@
 // stderr gets a summary: compute time per call, late ticks, error codes, and (when the table has
 // m_fl..m_rr) the largest deviation from the table's torques relative to its largest torque;
 // --check TOL fails (exit 1) above TOL. --free-run runs without waiting for the ticks.
+//
+// --track ROWS.csv: the payload tracker in the loop. ROWS.csv holds one causal row per tick (columns
+// kind, phi_m, phi_C, z of agvdyn.online.rows; optional `log`: a new log restarts the CUSUMs; optional
+// m_ch, C_ch: reference estimates, e.g. Python's). Each tick first runs PayloadTracker::update on
+// its row, then the feed-forward with the tracked m_ch, C_ch (Model::with_parameters); the loop
+// runs one tick per row, the table's setpoints repeating. The CSV gains the columns m_ch, C_ch,
+// event; stderr the tracker's time per tick, events and final estimates; with reference columns
+// the largest relative deviation from them, which --check then applies to (the table's torques
+// were computed with the file's parameters and are only compared for information).
 #include <agvdyn_ff/feedforward.hpp>
 #include <agvdyn_ff/parameter_file.hpp>
+#include <agvdyn_ff/tracker.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -98,14 +108,14 @@ bool to_number(const std::string& text, double* out) {
 void usage() {
   std::fprintf(stderr,
                "usage: control_loop PARAMS.yaml FEEDFORWARD.csv [--platform PLATFORM.yaml] [--rate HZ] "
-               "[--free-run] [--quiet] [--check TOL]\n");
+               "[--free-run] [--quiet] [--check TOL] [--track ROWS.csv]\n");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::vector<std::string> positional;
-  std::string platform_path;
+  std::string platform_path, track_path;
   double rate = 500.0, check = -1.0;
   bool free_run = false, quiet = false;
   for (int k = 1; k < argc; ++k) {
@@ -116,6 +126,8 @@ int main(int argc, char** argv) {
       rate = std::atof(argv[++k]);
     } else if (arg == "--check" && k + 1 < argc) {
       check = std::atof(argv[++k]);
+    } else if (arg == "--track" && k + 1 < argc) {
+      track_path = argv[++k];
     } else if (arg == "--free-run") {
       free_run = true;
     } else if (arg == "--quiet") {
@@ -227,29 +239,104 @@ int main(int argc, char** argv) {
     }
     start = end;
   }
-  std::vector<ff::Vector4> torques(n, ff::Vector4::Zero());
-  std::vector<ff::Status> status(n, ff::Status::ok);
-  std::vector<long long> compute_ns(n, 0);
+  // --track: the rows, the tracker and the per-tick buffers of its outputs
+  const bool tracking = !track_path.empty();
+  std::vector<ff::TrackerRow> rows;
+  std::vector<int> row_log;
+  std::vector<ff::Vector2> tracked_reference;
+  ff::PayloadTracker tracker;
+  if (tracking) {
+    Table rt;
+    if (!read_csv(track_path, &rt, &error)) {
+      std::fprintf(stderr, "error: %s\n", error.c_str());
+      return 2;
+    }
+    const int c_kind = rt.index("kind"), c_m = rt.index("phi_m"), c_c = rt.index("phi_C"), c_z = rt.index("z");
+    const int c_log = rt.index("log"), c_rm = rt.index("m_ch"), c_rc = rt.index("C_ch");
+    if (c_kind < 0 || c_m < 0 || c_c < 0 || c_z < 0) {
+      std::fprintf(stderr, "error: %s: expected the columns kind, phi_m, phi_C, z\n", track_path.c_str());
+      return 2;
+    }
+    for (std::size_t i = 0; i < rt.rows.size(); ++i) {
+      const auto& row = rt.rows[i];
+      double kind = 0, log = 0;
+      ff::TrackerRow r;
+      ff::Vector2 ref = ff::Vector2::Constant(std::nan(""));
+      bool ok = to_number(row[c_kind], &kind) && to_number(row[c_m], &r.phi_m) && to_number(row[c_c], &r.phi_C) &&
+                to_number(row[c_z], &r.z) && (c_log < 0 || to_number(row[c_log], &log));
+      if (ok && c_rm >= 0 && c_rc >= 0) ok = to_number(row[c_rm], &ref[0]) && to_number(row[c_rc], &ref[1]);
+      if (!ok) {
+        std::fprintf(stderr, "error: %s: row %zu: expected numbers\n", track_path.c_str(), i + 2);
+        return 2;
+      }
+      r.kind = static_cast<ff::RowKind>(static_cast<int>(kind));
+      rows.push_back(r);
+      row_log.push_back(static_cast<int>(log));
+      tracked_reference.push_back(ref);
+    }
+    const ff::Parameters& p = file.parameters;
+    if (ff::PayloadTracker::create(ff::Vector2(p.m_ch, p.C_ch), ff::Vector2::Zero(), 1.0 / rate, ff::TrackerSettings{},
+                                   &tracker) != ff::Status::ok) {
+      std::fprintf(stderr, "error: the tracker refuses m_ch = %g, C_ch = %g, dt = %g\n", p.m_ch, p.C_ch, 1.0 / rate);
+      return 2;
+    }
+  }
+  const std::size_t ticks = tracking ? rows.size() : n;
+  std::vector<ff::Vector4> torques(ticks, ff::Vector4::Zero());
+  std::vector<ff::Status> status(ticks, ff::Status::ok);
+  std::vector<long long> compute_ns(ticks, 0), track_ns(tracking ? ticks : 0, 0);
+  std::vector<ff::Vector2> tracked(tracking ? ticks : 0, ff::Vector2::Zero());
+  std::vector<int> tracked_event(tracking ? ticks : 0, 0);
+  std::vector<ff::Status> track_status(tracking ? ticks : 0, ff::Status::ok);
+  ff::Model tracked_model = model;
 
   // --- the loop: no allocation, no I/O ----------------------------------------------------------
   using clock = std::chrono::steady_clock;
   const auto period = std::chrono::duration_cast<clock::duration>(std::chrono::duration<double>(1.0 / rate));
   const auto t_start = clock::now() + period;
   std::size_t late = 0;
-  for (std::size_t k = 0; k < n; ++k) {
+  ff::TrackerOutput tracker_out;
+  int log = tracking && ticks ? row_log[0] : 0;
+  for (std::size_t k = 0; k < ticks; ++k) {
     const auto tick = t_start + static_cast<long long>(k) * period;
     if (!free_run) {
       if (clock::now() > tick) ++late;
       std::this_thread::sleep_until(tick);
     }
     const auto c0 = clock::now();
-    status[k] = model.feedforward(setpoints[k], torques[k]);
-    const auto c1 = clock::now();
-    compute_ns[k] = std::chrono::duration_cast<std::chrono::nanoseconds>(c1 - c0).count();
+    if (tracking) {  // the tracker first, then the feed-forward with its estimates
+      if (row_log[k] != log) {
+        tracker.begin_log();
+        log = row_log[k];
+      }
+      track_status[k] = tracker.update(rows[k], tracker_out);
+      ff::Parameters p = model.parameters();
+      p.m_ch = tracker_out.estimate[0];
+      p.C_ch = tracker_out.estimate[1];
+      if (model.with_parameters(p, &tracked_model) != ff::Status::ok) track_status[k] = ff::Status::invalid_model;
+      tracked[k] = tracker_out.estimate;
+      tracked_event[k] = tracker_out.event;
+      const auto c1 = clock::now();
+      track_ns[k] = std::chrono::duration_cast<std::chrono::nanoseconds>(c1 - c0).count();
+      status[k] = tracked_model.feedforward(setpoints[k % n], torques[k]);
+      compute_ns[k] = std::chrono::duration_cast<std::chrono::nanoseconds>(clock::now() - c1).count();
+    } else {
+      status[k] = model.feedforward(setpoints[k], torques[k]);
+      const auto c1 = clock::now();
+      compute_ns[k] = std::chrono::duration_cast<std::chrono::nanoseconds>(c1 - c0).count();
+    }
   }
 
   // --- report -------------------------------------------------------------------------------------
-  if (!quiet) {
+  if (!quiet && tracking) {
+    std::printf("t,mode,m_fl,m_rl,m_fr,m_rr,m_ch,C_ch,event\n");
+    for (std::size_t k = 0; k < ticks; ++k) {
+      const ff::Setpoint& sp = setpoints[k % n];
+      std::printf("%.6f,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%d\n", static_cast<double>(k) / rate, ff::label(sp.mode),
+                  torques[k][0], torques[k][1], torques[k][2], torques[k][3], tracked[k][0], tracked[k][1],
+                  tracked_event[k]);
+    }
+  } else if (!quiet) {
     std::printf("t,mode,m_fl,m_rl,m_fr,m_rr\n");
     for (std::size_t k = 0; k < n; ++k) {
       std::printf("%.6f,%s,%.17g,%.17g,%.17g,%.17g\n", t[k], ff::label(setpoints[k].mode), torques[k][0], torques[k][1],
@@ -257,17 +344,43 @@ int main(int argc, char** argv) {
     }
   }
   std::map<std::string, std::size_t> errors;
-  for (std::size_t k = 0; k < n; ++k) {
+  for (std::size_t k = 0; k < ticks; ++k) {
     if (status[k] != ff::Status::ok) ++errors[ff::to_string(status[k])];
+    if (tracking && track_status[k] != ff::Status::ok) ++errors[std::string("tracker ") + ff::to_string(track_status[k])];
   }
   std::vector<long long> sorted = compute_ns;
   std::sort(sorted.begin(), sorted.end());
   std::fprintf(stderr, "control_loop: %zu steps at %.0f Hz%s; feed-forward per call: median %lld ns, max %lld ns; "
-               "late ticks %zu\n", n, rate, free_run ? " (free run)" : "", n ? sorted[n / 2] : 0LL,
-               n ? sorted.back() : 0LL, late);
+               "late ticks %zu\n", ticks, rate, free_run ? " (free run)" : "", ticks ? sorted[ticks / 2] : 0LL,
+               ticks ? sorted.back() : 0LL, late);
   for (const auto& [name, count] : errors) std::fprintf(stderr, "control_loop: %zu steps with %s\n", count, name.c_str());
   int rc = errors.empty() ? 0 : 1;
-  if (has_m) {
+  if (tracking) {
+    std::vector<long long> ts = track_ns;
+    std::sort(ts.begin(), ts.end());
+    const ff::Vector2 est = tracker.estimate(), sd = tracker.std();
+    std::fprintf(stderr, "control_loop: tracker + model update per tick: median %lld ns, max %lld ns; %lld changes "
+                 "detected; final m_ch %.2f +- %.2f kg, C_ch %.3f +- %.3f kg m^2\n", ticks ? ts[ticks / 2] : 0LL,
+                 ticks ? ts.back() : 0LL, static_cast<long long>(tracker.event_count()), est[0], sd[0], est[1], sd[1]);
+    double worst = -1;
+    for (std::size_t k = 0; k < ticks; ++k) {
+      if (std::isnan(tracked_reference[k][0])) continue;
+      for (int i = 0; i < 2; ++i) {
+        worst = std::max(worst, std::abs(tracked[k][i] - tracked_reference[k][i]) / std::abs(tracked_reference[k][i]));
+      }
+    }
+    if (worst >= 0) {
+      std::fprintf(stderr, "control_loop: largest relative deviation of the tracked m_ch, C_ch from the rows' "
+                   "reference: %.3g\n", worst);
+      if (check >= 0 && !(worst <= check)) {
+        std::fprintf(stderr, "control_loop: deviation %.3g above --check %.3g\n", worst, check);
+        rc = 1;
+      }
+    } else if (check >= 0) {
+      std::fprintf(stderr, "control_loop: --check with --track needs the columns m_ch, C_ch in %s\n", track_path.c_str());
+      rc = 1;
+    }
+  } else if (has_m) {
     double scale = 0, worst = 0;
     for (std::size_t k = 0; k < n; ++k) scale = std::max(scale, reference[k].cwiseAbs().maxCoeff());
     for (std::size_t k = 0; k < n; ++k) worst = std::max(worst, (torques[k] - reference[k]).cwiseAbs().maxCoeff());

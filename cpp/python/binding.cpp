@@ -1,15 +1,19 @@
-// agvdyn.ffcpp._core: the C++ feed-forward (agvdyn_ff) for Python, through nanobind.
-// The Python glue (src/agvdyn/ffcpp/__init__.py) checks and shapes the arrays; this layer loops
-// over the samples with the GIL released and reports the first failing row.
+// agvdyn.ffcpp._core: the C++ feed-forward (agvdyn_ff) and payload tracker for Python, through
+// nanobind. The Python glue (src/agvdyn/ffcpp/__init__.py) checks and shapes the arrays; this layer
+// loops over the samples with the GIL released and reports the first failing row.
 #include <agvdyn_ff/feedforward.hpp>
 #include <agvdyn_ff/parameter_file.hpp>
+#include <agvdyn_ff/tracker.hpp>
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/map.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
+#include <cstdint>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -128,6 +132,152 @@ nb::dict parameter_file(const std::string& path) {
   return out;
 }
 
+// --- payload tracker ------------------------------------------------------------------------------
+using Flat = nb::ndarray<double, nb::c_contig, nb::device::cpu>;              // any shape, as a flat buffer
+using In1 = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using InKind = nb::ndarray<const std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using Out1 = nb::ndarray<double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using OutKind = nb::ndarray<std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using Event = std::tuple<std::int64_t, std::int64_t, int, int, double, double, double, double>;
+
+ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<double, double> nominal_std, double dt,
+                                const std::map<std::string, double>& values) {
+  ff::TrackerSettings s;
+  const std::map<std::string, double*> fields = {
+      {"change_size", &s.change_size}, {"gate", &s.gate}, {"correlation", &s.correlation},
+      {"rotation_correlation", &s.rotation_correlation}, {"threshold", &s.threshold},
+      {"random_walk", &s.random_walk}, {"bias_walk", &s.bias_walk}, {"reset_std", &s.reset_std},
+      {"noise_time", &s.noise_time}, {"initial_std", &s.initial_std}, {"bias_std", &s.bias_std},
+      {"noise", &s.noise}};
+  for (const auto& [key, value] : values) {
+    if (key == "warm_rows") {
+      s.warm_rows = static_cast<int>(value);
+    } else if (auto it = fields.find(key); it != fields.end()) {
+      *it->second = value;
+    } else {
+      throw std::invalid_argument("tracker setting " + key + ": unknown");
+    }
+  }
+  ff::PayloadTracker tracker;
+  const ff::Vector2 n(std::get<0>(nominal), std::get<1>(nominal)), sd(std::get<0>(nominal_std), std::get<1>(nominal_std));
+  if (ff::PayloadTracker::create(n, sd, dt, s, &tracker) != ff::Status::ok) {
+    throw std::invalid_argument("agvdyn_ff tracker: invalid_model: expected nominal m_ch, C_ch > 0, stds >= 0, dt > 0, "
+                                "every setting finite and > 0 (warm_rows >= 0)");
+  }
+  return tracker;
+}
+
+// The state as the arrays of agvdyn.online.tracker.TrackerState: theta (8), P (8, 8), R (3),
+// n_rows (9), g (2, 2), Iw (2, 2, 8, 8), bw (2, 2, 8), start (2, 2); CUSUM (i, s) is index 2 i + s.
+void check_size(const char* name, std::size_t size, std::size_t expected) {
+  if (size != expected) {
+    throw std::invalid_argument(std::string(name) + " of " + std::to_string(size) + " values: expected " +
+                                std::to_string(expected));
+  }
+}
+
+void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
+  check_size("theta", theta.size(), 8);
+  check_size("P", P.size(), 64);
+  check_size("R", R.size(), 3);
+  check_size("n_rows", n_rows.size(), 9);
+  check_size("g", g.size(), 4);
+  check_size("Iw", Iw.size(), 256);
+  check_size("bw", bw.size(), 32);
+  check_size("start", start.size(), 4);
+  ff::PayloadTracker::State st = tracker.state();
+  for (int p = 0; p < 8; ++p) {
+    st.theta[p] = theta.data()[p];
+    for (int q = 0; q < 8; ++q) st.P(p, q) = P.data()[8 * p + q];
+  }
+  for (int k = 0; k < 3; ++k) st.R[k] = R.data()[k];
+  for (int k = 0; k < 9; ++k) st.n_rows[k] = n_rows.data()[k];
+  for (int c = 0; c < 4; ++c) {
+    st.g[static_cast<std::size_t>(c)] = g.data()[c];
+    st.start[static_cast<std::size_t>(c)] = static_cast<std::int64_t>(start.data()[c]);
+    for (int p = 0; p < 8; ++p) {
+      st.bw[static_cast<std::size_t>(c)][p] = bw.data()[8 * c + p];
+      for (int q = 0; q < 8; ++q) st.Iw[static_cast<std::size_t>(c)](p, q) = Iw.data()[64 * c + 8 * p + q];
+    }
+  }
+  st.sample = 0;
+  if (tracker.set_state(st) != ff::Status::ok) throw std::invalid_argument("tracker state: NaN or infinity");
+}
+
+void store_state(const ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw,
+                 Flat start) {
+  check_size("theta", theta.size(), 8);
+  check_size("P", P.size(), 64);
+  check_size("R", R.size(), 3);
+  check_size("n_rows", n_rows.size(), 9);
+  check_size("g", g.size(), 4);
+  check_size("Iw", Iw.size(), 256);
+  check_size("bw", bw.size(), 32);
+  check_size("start", start.size(), 4);
+  const ff::PayloadTracker::State& st = tracker.state();
+  for (int p = 0; p < 8; ++p) {
+    theta.data()[p] = st.theta[p];
+    for (int q = 0; q < 8; ++q) P.data()[8 * p + q] = st.P(p, q);
+  }
+  for (int k = 0; k < 3; ++k) R.data()[k] = st.R[k];
+  for (int k = 0; k < 9; ++k) n_rows.data()[k] = st.n_rows[k];
+  for (int c = 0; c < 4; ++c) {
+    g.data()[c] = st.g[static_cast<std::size_t>(c)];
+    start.data()[c] = static_cast<double>(st.start[static_cast<std::size_t>(c)]);
+    for (int p = 0; p < 8; ++p) {
+      bw.data()[8 * c + p] = st.bw[static_cast<std::size_t>(c)][p];
+      for (int q = 0; q < 8; ++q) Iw.data()[64 * c + 8 * p + q] = st.Iw[static_cast<std::size_t>(c)](p, q);
+    }
+  }
+}
+
+// N samples through update(): per sample the 8 estimates and variances (as agvdyn.online's
+// track_rows), nis, event flags; returns (status, first refused row or -1, events).
+std::tuple<int, long, std::vector<Event>> run_tracker(ff::PayloadTracker& tracker, InKind kind, In2 phi, In1 z,
+                                                      Out2 theta, Out2 var, Out1 nis, OutKind event) {
+  const std::size_t n = kind.shape(0);
+  check_shape("phi", phi.shape(0), phi.shape(1), n, 2);
+  check_shape("z", z.shape(0), 1, n, 1);
+  check_shape("theta", theta.shape(0), theta.shape(1), n, 8);
+  check_shape("var", var.shape(0), var.shape(1), n, 8);
+  check_shape("nis", nis.shape(0), 1, n, 1);
+  check_shape("event", event.shape(0), 1, n, 1);
+  std::vector<Event> events;
+  int first_status = 0;
+  long first_row = -1;
+  const std::int64_t* k = kind.data();
+  const double* ph = phi.data();
+  const double* zz = z.data();
+  double* th = theta.data();
+  double* va = var.data();
+  double* ni = nis.data();
+  std::int64_t* ev = event.data();
+  {
+    nb::gil_scoped_release release;
+    ff::TrackerOutput out;
+    for (std::size_t j = 0; j < n; ++j) {
+      const ff::TrackerRow row{static_cast<ff::RowKind>(k[j]), ph[2 * j], ph[2 * j + 1], zz[j]};
+      const ff::Status status = tracker.update(row, out);
+      if (status != ff::Status::ok && first_row < 0) {
+        first_status = static_cast<int>(status);
+        first_row = static_cast<long>(j);
+      }
+      const ff::PayloadTracker::State& st = tracker.state();
+      for (int p = 0; p < 8; ++p) {
+        th[8 * j + static_cast<std::size_t>(p)] = st.theta[p];
+        va[8 * j + static_cast<std::size_t>(p)] = st.P(p, p);
+      }
+      ni[j] = out.nis;
+      ev[j] = out.event;
+      for (int e = 0; e < out.n_events; ++e) {
+        const ff::TrackerEvent& x = out.events[static_cast<std::size_t>(e)];
+        events.emplace_back(x.sample, x.start, x.parameter, x.sign, x.before, x.before_var, x.after, x.after_var);
+      }
+    }
+  }
+  return {first_status, first_row, std::move(events)};
+}
+
 }  // namespace
 
 NB_MODULE(_core, m) {
@@ -145,6 +295,36 @@ NB_MODULE(_core, m) {
       .def("feedforward", &feedforward, nb::arg("mode"), nb::arg("alpha"), nb::arg("s_dot"), nb::arg("s_ddot"),
            nb::arg("u"), nb::arg("q_dot"), nb::arg("q_ddot"),
            "Fill u (N, 4) (and q_dot, q_ddot (N, 9) when they have N rows); return (status, first failing row or -1).");
+  nb::class_<ff::PayloadTracker>(m, "PayloadTracker")
+      .def(
+          "__init__",
+          [](ff::PayloadTracker* self, std::tuple<double, double> nominal, std::tuple<double, double> nominal_std,
+             double dt, const std::map<std::string, double>& settings) {
+            new (self) ff::PayloadTracker(make_tracker(nominal, nominal_std, dt, settings));
+          },
+          nb::arg("nominal"), nb::arg("nominal_std"), nb::arg("dt"), nb::arg("settings"),
+          "PayloadTracker((m_ch, C_ch), (std, std), dt, {setting: value}) (agvdyn_ff::PayloadTracker::create)")
+      .def("load_state", &load_state, nb::arg("theta"), nb::arg("P"), nb::arg("R"), nb::arg("n_rows"), nb::arg("g"),
+           nb::arg("Iw"), nb::arg("bw"), nb::arg("start"),
+           "Set the state from the arrays of agvdyn.online.tracker.TrackerState; the sample count restarts at 0.")
+      .def("store_state", &store_state, nb::arg("theta"), nb::arg("P"), nb::arg("R"), nb::arg("n_rows"), nb::arg("g"),
+           nb::arg("Iw"), nb::arg("bw"), nb::arg("start"), "Write the state into TrackerState's arrays (in place).")
+      .def("begin_log", &ff::PayloadTracker::begin_log, "CUSUMs to zero, samples counted from 0 (a new log).")
+      .def("run", &run_tracker, nb::arg("kind"), nb::arg("phi"), nb::arg("z"), nb::arg("theta"), nb::arg("var"),
+           nb::arg("nis"), nb::arg("event"),
+           "Update with N rows; fill theta, var (N, 8), nis, event (N,); return (status, first refused row or -1, "
+           "events [(sample, start, parameter, sign, before, before_var, after, after_var)]).")
+      .def(
+          "update",
+          [](ff::PayloadTracker& self, int kind, double phi_m, double phi_C, double z) {
+            ff::TrackerOutput out;
+            const ff::Status status = self.update(ff::TrackerRow{static_cast<ff::RowKind>(kind), phi_m, phi_C, z}, out);
+            return std::make_tuple(static_cast<int>(status), std::make_tuple(out.estimate[0], out.estimate[1]),
+                                   std::make_tuple(out.std[0], out.std[1]), out.nis, out.event);
+          },
+          nb::arg("kind"), nb::arg("phi_m"), nb::arg("phi_C"), nb::arg("z"),
+          "One sample: (status, (m_ch, C_ch), (std, std), nis, event flags).")
+      .def_prop_ro("event_count", [](const ff::PayloadTracker& self) { return self.event_count(); });
   m.def("status_name", [](int code) { return std::string(ff::to_string(static_cast<ff::Status>(code))); });
   m.def("read_parameter_file", &parameter_file, nb::arg("path"),
         "The C++ reader of parameter files: {'parameters': {name: value}, 'platform': {...} or None}.");

@@ -173,6 +173,7 @@ const char* to_string(Status status) noexcept {
     case Status::not_in_mode: return "not_in_mode";
     case Status::singular: return "singular";
     case Status::invalid_model: return "invalid_model";
+    case Status::unknown_row_kind: return "unknown_row_kind";
   }
   return "unknown_status";
 }
@@ -246,6 +247,16 @@ Status Model::create(const Geometry& g, const Parameters& parameters, const Sett
     }
   }
   *model = m;
+  return Status::ok;
+}
+
+Status Model::with_parameters(const Parameters& parameters, Model* out) const noexcept {
+  if (out == nullptr) return Status::invalid_model;
+  const Vector11 p = parameters.to_vector();
+  if (!p.allFinite()) return Status::invalid_model;
+  if (out != this) *out = *this;
+  out->parameters_ = parameters;
+  out->p_ = p;
   return Status::ok;
 }
 

@@ -6,7 +6,11 @@ three vehicles, with the joint motion (eq. 4, 20) and the motor torques of eq. (
 The C++ tests (``ff_tests``, ctest) and the pytest suite (``tests/test_cpp_feedforward.py``) both
 read this file. Regenerate after a change of the Python model::
 
-    .venv/bin/python cpp/tests/make_vectors.py
+    .venv/bin/python cpp/tests/make_vectors.py [--tracker | --feedforward]
+
+Also the payload tracker's vectors (``--tracker`` alone): ``cpp/tests/tracker_vectors.json`` (settings,
+events, final state) and ``cpp/tests/data/tracker_sequence.csv`` (per sample: the row the C++
+``PayloadTracker::update`` takes and the outputs of the Python reference ``agvdyn.online.tracker``).
 """
 from __future__ import annotations
 
@@ -31,7 +35,11 @@ from agvdyn.kinematics import (
 from agvdyn.platform import EPSILON, PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE, Geometry, Parameters
 
 PATH = Path(__file__).with_name("vectors.json")
+TRACKER_PATH = Path(__file__).with_name("tracker_vectors.json")
 DATA = Path(__file__).with_name("data")
+TRACKER_SEQUENCE = DATA / "tracker_sequence.csv"
+#: Columns of the tracker sequence: the inputs of PayloadTracker::update, then the Python outputs.
+TRACKER_COLUMNS = ("log", "kind", "phi_m", "phi_C", "z", "m_ch", "C_ch", "m_ch_std", "C_ch_std", "nis", "event")
 SEED = 20240613
 CASES_PER_MODE = 16
 #: |u_cpp - u_python| <= RELATIVE * max|u_python| + ABSOLUTE, per case (N m).
@@ -194,11 +202,149 @@ def write_example_data() -> None:
     pd.concat(windows).to_csv(DATA / "feedforward_short.csv", index=False)
 
 
+# --- the payload tracker (agvdyn.online.tracker; C++ agvdyn_ff::PayloadTracker) -------------------
+
+def tracker_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], float]:
+    """The tracker's input rows, per log: (kind (N,), phi (N, 2), z (N,)), and dt. Log 0: the causal rows
+    (agvdyn.online.rows) of a simulated warehouse drive (our plant, prototype, Table 2, seed 2) that
+    picks up 300 kg (at (0.2, 0) m, C 60 kg m^2) at 5 s, samples without a row thinned to every 25th,
+    the first 3,500; log 1: :func:`_synthetic_rows`."""
+    import subprocess
+    import tempfile
+
+    from agvdyn.io import load_log
+    from agvdyn.online import TrackerSettings
+    from agvdyn.online.rows import causal_rows
+    from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "drive.parquet"
+        subprocess.run([str(Path(sys.executable).with_name("agvdyn")), "simulate", "driving", "--duration", "16", "--seed", "2",
+                        "--payload", "5:300:0.2,0:60", "--quiet", "--out", str(out)], check=True, capture_output=True)
+        log = load_log(out)
+    rules = TrackerSettings().rules
+    rows = causal_rows(log.t, log.alpha, log.beta, log.torque, PROTOTYPE, PAPER_PARAMETERS, rules=rules,
+                       torque_lead=0.0, slip_threshold=TrackerSettings().slip_threshold)
+    keep = np.flatnonzero((rows.kind > 0) | (np.arange(rows.n) % 25 == 0))[:3500]  # the step's detection: 1,889
+    logs = [(rows.kind[keep].astype(np.int64), rows.phi[keep], rows.z[keep])]
+    logs.append(_synthetic_rows(np.random.default_rng(SEED)))
+    return logs, rows.dt
+
+
+def _synthetic_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Log 1: rows of the tracker's own model z = phi_m m + phi_C C + b_kind + AR(1) noise, in runs of
+    every kind, with a drop of 300 kg at the second x_ch+ run and +40 kg m^2 of C_ch at the second
+    gamma_ch+ run (negative signs, C_ch detection, every bias and noise class)."""
+    runs = [(1, 400), (5, 2500), (2, 300), (3, 200), (6, 300), (1, 500), (5, 800), (4, 300)]
+    kind = np.concatenate([np.full(n, k) for k, n in runs]).astype(np.int64)
+    n = kind.size
+    i = np.arange(n)
+    wave = np.sin(2 * np.pi * i / 400.0 + rng.uniform(0, 2 * np.pi))
+    coord = (kind + 1) // 2
+    phi = np.zeros((n, 2))
+    phi[:, 0] = np.where(coord == 1, 0.4 * wave, np.where(coord == 2, 0.3 * wave, 0.0))
+    phi[:, 1] = np.where(coord == 3, 1.0 * wave, np.where(coord == 1, 0.05 * np.cos(2 * np.pi * i / 400.0), 0.0))
+    starts = np.cumsum([0] + [r[1] for r in runs])
+    m = np.where(i >= starts[5], 842.0684, 1142.0684)
+    C = np.where(i >= starts[6], 326.6, 286.6)
+    bias = np.array([0.0, 3.0, -2.0, 1.5, -1.0, 0.8, -0.5])[kind]
+    e = rng.normal(0.0, 0.6, n)
+    noise = np.zeros(n)
+    for k in range(1, n):
+        noise[k] = 0.98 * noise[k - 1] + e[k]
+    z = phi[:, 0] * m + phi[:, 1] * C + bias + noise
+    kind[::97] = 0  # some samples without a row
+    return kind, phi, z
+
+
+def run_python_tracker(logs, dt: float, nominal, nominal_std):
+    """The Python reference over the logs as agvdyn.online.track runs them (state carried, CUSUMs
+    restarted per log): per-sample outputs (N, 6) = m_ch, C_ch, their stds, nis, event; the events
+    (log, parameter, sign, sample, start, before, before_var, after, after_var); the final state."""
+    from agvdyn.online import _kernels as kern
+    from agvdyn.online import TrackerSettings
+    from agvdyn.online.tracker import TrackerState
+    from agvdyn.platform import PAPER_PARAMETERS
+
+    settings = TrackerSettings()
+    params = PAPER_PARAMETERS.replace(m_ch=float(nominal[0]), C_ch=float(nominal[1]))
+    state = TrackerState.initial(params, dict(zip(("m_ch", "C_ch"), nominal_std)), settings)
+    k = settings.constants(np.asarray(nominal, dtype=float), dt)
+    outputs, events = [], []
+    for index, (kind, phi, z) in enumerate(logs):
+        n = kind.size
+        state.g[:] = 0.0
+        theta, var, nis = np.zeros((n, kern.NS)), np.zeros((n, kern.NS)), np.zeros(n)
+        flag = np.zeros(n, dtype=np.int64)
+        found = np.zeros((settings.max_events, kern.E_NCOLS))
+        count = kern.track_rows(np.ascontiguousarray(phi), np.ascontiguousarray(z), kind, k, state.theta, state.P,
+                                state.R, state.n_rows, state.g, state.Iw, state.bw, state.start, theta, var, nis,
+                                flag, found, 0)
+        outputs.append(np.column_stack([theta[:, :2], np.sqrt(var[:, :2]), nis, flag]))
+        for e in found[:count]:
+            events.append({"log": index, "parameter": int(e[kern.E_PARAM]), "sign": int(e[kern.E_SIGN]),
+                           "sample": int(e[kern.E_K]), "start": int(e[kern.E_START]),
+                           "before": float(e[kern.E_BEFORE]), "before_var": float(e[kern.E_BEFORE_VAR]),
+                           "after": float(e[kern.E_AFTER]), "after_var": float(e[kern.E_AFTER_VAR])})
+    final = {"theta": _floats(state.theta), "P": _floats(state.P), "R": _floats(state.R),
+             "n_rows": _floats(state.n_rows), "g": _floats(state.g), "start": [int(v) for v in np.ravel(state.start)]}
+    return np.concatenate(outputs), events, final
+
+
+def tracker_vectors() -> tuple[dict[str, Any], list[list[float]]]:
+    """The tracker's vectors (JSON part) and the per-sample table of cpp/tests/data/tracker_sequence.csv."""
+    from agvdyn.online import TrackerSettings
+    from agvdyn.platform import PAPER_PARAMETERS, PAPER_STD
+
+    logs, dt = tracker_inputs()
+    nominal = [PAPER_PARAMETERS.m_ch, PAPER_PARAMETERS.C_ch]
+    nominal_std = [PAPER_STD["m_ch"], PAPER_STD["C_ch"]]
+    outputs, events, final = run_python_tracker(logs, dt, nominal, nominal_std)
+    settings = {k: v for k, v in TrackerSettings().__dict__.items() if k not in ("rules", "slip_threshold", "max_events")}
+    data = {
+        "description": "C++ PayloadTracker (cpp/) against the Python reference agvdyn.online.tracker on one "
+                       "sequence of rows (log 0: a simulated drive picking up 300 kg at 5 s; log 1: synthetic rows "
+                       "of every kind with a drop and a C_ch step); per-sample table in data/tracker_sequence.csv; "
+                       "generated by cpp/tests/make_vectors.py, read by ff_tests and tests/test_cpp_feedforward.py",
+        "tolerance": {"relative": RELATIVE, "rule": "|x - x_ref| <= relative * max(|x_ref|, 1) for every output "
+                      "(estimates, stds, nis, event values and variances, final state); NaN nis where the reference "
+                      "has NaN; event flags, event samples, starts, signs exact"},
+        "settings": settings, "nominal": nominal, "nominal_std": nominal_std, "dt": dt,
+        "logs": [int(kind.size) for kind, _, _ in logs], "sequence": f"data/{TRACKER_SEQUENCE.name}",
+        "events": events, "final": final,
+    }
+    table = []
+    offset = 0
+    for index, (kind, phi, z) in enumerate(logs):
+        for j in range(kind.size):
+            o = outputs[offset + j]
+            table.append([index, int(kind[j]), float(phi[j, 0]), float(phi[j, 1]), float(z[j]), *map(float, o[:5]), int(o[5])])
+        offset += kind.size
+    return data, table
+
+
+def write_tracker_vectors() -> None:
+    data, table = tracker_vectors()
+    TRACKER_PATH.write_text(to_text(data), encoding="utf-8")
+    DATA.mkdir(exist_ok=True)
+    lines = [",".join(TRACKER_COLUMNS)]
+    lines += [",".join(repr(v) if isinstance(v, float) else str(v) for v in row) for row in table]
+    TRACKER_SEQUENCE.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
 def main() -> int:
-    PATH.write_text(to_text(vectors()), encoding="utf-8")
-    print(f"wrote {PATH}")
-    write_example_data()
-    print(f"wrote {DATA}/params.yaml, platform.yaml, feedforward_short.csv")
+    only = set(sys.argv[1:])  # --tracker or --feedforward: only that part
+    if only - {"--tracker", "--feedforward"}:
+        print("usage: make_vectors.py [--tracker | --feedforward]", file=sys.stderr)
+        return 2
+    if "--tracker" not in only or "--feedforward" in only:
+        PATH.write_text(to_text(vectors()), encoding="utf-8")
+        print(f"wrote {PATH}")
+        write_example_data()
+        print(f"wrote {DATA}/params.yaml, platform.yaml, feedforward_short.csv")
+    if "--feedforward" not in only or "--tracker" in only:
+        write_tracker_vectors()
+        print(f"wrote {TRACKER_PATH}, {TRACKER_SEQUENCE}")
     return 0
 
 

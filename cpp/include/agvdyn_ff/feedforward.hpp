@@ -46,7 +46,7 @@ const char* label(Mode mode) noexcept;
 /// "rotation", ...; the labels Python's Mode.from_label accepts). False for anything else.
 bool mode_from_label(const char* text, Mode* mode) noexcept;
 
-/// Outcome of a call. Everything but ok leaves the torques at zero.
+/// Outcome of a call. Everything but ok leaves the torques at zero (PayloadTracker: the state unchanged).
 enum class Status : int {
   ok = 0,
   unknown_mode = 1,        ///< mode is not one of 1, 2, 3, 4, straight
@@ -55,6 +55,7 @@ enum class Status : int {
   not_in_mode = 4,         ///< alpha is not in the mode within mode_tolerance (eq. 9)
   singular = 5,            ///< N^T B has no full rank (a = 0: the wheels cannot steer)
   invalid_model = 6,       ///< geometry, parameters or settings break their invariants
+  unknown_row_kind = 7,    ///< PayloadTracker: a row kind not in 0..6 (tracker.hpp)
 };
 
 /// Short name of a status ("ok", "not_in_mode", ...).
@@ -114,6 +115,11 @@ class Model {
   /// a parameter is not finite, or epsilon, mode_tolerance are not > 0 (as Python's Geometry).
   static Status create(const Geometry& geometry, const Parameters& parameters, const Settings& settings,
                        Model* model) noexcept;
+
+  /// This model with other parameters (the geometry's precomputed parts kept), e.g. the m_ch, C_ch
+  /// of a PayloadTracker: no allocation, no exceptions, cheap enough per control step (a copy).
+  /// Status::invalid_model (out untouched) when a parameter is not finite.
+  Status with_parameters(const Parameters& parameters, Model* out) const noexcept;
 
   /// Motor torques u (fl, rl, fr, rr; N m, motor side) of eq. (21). The per-step call: no heap
   /// allocation, no exceptions. On any status but ok, u is zero (and motion, when given, too).

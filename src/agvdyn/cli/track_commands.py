@@ -24,18 +24,32 @@ def track(
     threshold: float = typer.Option(12.0, "--threshold", help="CUSUM threshold of the change detection "
                                     "(larger: fewer false alarms, later detection)."),
     as_json: bool = typer.Option(False, "--json", help="Print events and final estimates as JSON."),
+    engine: str = typer.Option("python", "--engine", metavar="python|cpp", help="The tracker's update: python "
+                               "(the reference, numba) or cpp (agvdyn_ff::PayloadTracker through agvdyn.ffcpp; "
+                               "the same numbers); the causal rows are Python's either way."),
 ) -> None:
     """Track m_ch and C_ch through logs and detect payload changes (recursive estimate, CUSUM, reset)."""
     if out.suffix.lower() not in (".parquet", ".csv"):
         raise fail(f"--out {out}: unknown suffix {out.suffix!r}: expected .parquet or .csv")
     if not rate > 0:
         raise fail(f"--rate {rate}: expected > 0 Hz")
+    if engine not in ("python", "cpp"):
+        raise fail(f"--engine {engine}: expected python or cpp")
     refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--params": params, "--platform": platform},
                      {"--out": "table"})
     from agvdyn._files import write_atomically
     from agvdyn.cli.sim_commands import _parameter_file
     from agvdyn.identification import load_logs
     from agvdyn.online import TrackerSettings, track as run
+
+    if engine == "cpp":
+        from agvdyn import ffcpp
+
+        try:
+            ffcpp.extension()
+        except ffcpp.CppEngineUnavailable as exc:
+            raise fail(str(exc)) from exc
+        from agvdyn.online.cpp import track as run
     from agvdyn.platform import platform_of_parameters
 
     content = _parameter_file(params)

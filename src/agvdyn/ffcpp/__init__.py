@@ -1,5 +1,8 @@
 """The C++ feed-forward (``cpp/``, library ``agvdyn_ff``) from Python: eq. (21) on the same inputs as
-:func:`agvdyn.dynamics.feedforward_torques`, which stays the reference.
+:func:`agvdyn.dynamics.feedforward_torques`, which stays the reference; and the C++ payload tracker
+(``agvdyn_ff::PayloadTracker``) on the causal rows of :mod:`agvdyn.online.rows`, the twin of
+:func:`agvdyn.online._kernels.track_rows` (:func:`track_rows`; ``agvdyn.online.cpp`` builds the
+replay of ``agvdyn.online.track`` on it).
 
 The compiled extension ``agvdyn.ffcpp._core`` is built by ``pip install`` (CMake + nanobind through
 ``agvdyn._ffbuild``, see ``docs/cpp.md``); ``import agvdyn`` never needs it. Without it, :func:`extension`
@@ -22,7 +25,8 @@ from agvdyn.kinematics.constraints import _rows
 from agvdyn.platform import EPSILON, Geometry, Parameters
 
 __all__ = ["Engine", "ENGINES", "CppEngineUnavailable", "available", "extension", "check_engine",
-           "feedforward_torques", "joint_motion", "trajectory_feedforward", "read_parameter_file"]
+           "feedforward_torques", "joint_motion", "trajectory_feedforward", "read_parameter_file", "track_rows",
+           "TRACKER_SETTINGS"]
 
 #: Implementations of the feed-forward of eq. (21): ``python`` (the reference) or ``cpp``.
 Engine = Literal["python", "cpp"]
@@ -130,3 +134,38 @@ def read_parameter_file(path) -> dict:
     """What the C++ reader (``agvdyn_ff::read_parameter_file``) finds in a parameter file:
     ``{"parameters": {name: value}, "platform": {name, l, b, a, r, i_G} or None}``; ValueError otherwise."""
     return extension().read_parameter_file(str(path))
+
+
+# --- payload tracker ------------------------------------------------------------------------------
+
+#: Fields of agvdyn.online.TrackerSettings that the C++ tracker takes (the rest belong to the rows).
+TRACKER_SETTINGS = ("change_size", "gate", "correlation", "rotation_correlation", "threshold", "random_walk",
+                    "bias_walk", "reset_std", "noise_time", "warm_rows", "initial_std", "bias_std", "noise")
+
+
+def track_rows(kind, phi, z, state, settings, nominal, dt: float):
+    """The rows of one log through ``agvdyn_ff::PayloadTracker`` (the C++ twin of
+    ``agvdyn.online._kernels.track_rows``): ``kind`` (N,), ``phi`` (N, 2), ``z`` (N,); ``state`` an
+    ``agvdyn.online.tracker.TrackerState`` (updated in place), ``settings`` a ``TrackerSettings``,
+    ``nominal`` (m_ch, C_ch), ``dt`` s. Returns estimates (N, 8), variances (N, 8), NIS (N,), event flags
+    (N,) and the events as tuples (sample, start, parameter, sign, before, before_var, after, after_var).
+    ValueError naming the first refused row (unknown kind, NaN or infinity)."""
+    core = extension()
+    tracker = core.PayloadTracker((float(nominal[0]), float(nominal[1])), (0.0, 0.0), float(dt),
+                                  {k: float(getattr(settings, k)) for k in TRACKER_SETTINGS})
+    arrays = (state.theta, state.P, state.R, state.n_rows, state.g, state.Iw, state.bw, state.start)
+    if not all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.c_contiguous for a in arrays):
+        raise ValueError("tracker state: expected C-contiguous float64 arrays (TrackerState)")
+    tracker.load_state(*arrays)
+    kind = np.ascontiguousarray(kind, dtype=np.int64)
+    phi = np.ascontiguousarray(phi, dtype=float)
+    z = np.ascontiguousarray(z, dtype=float)
+    n = kind.size
+    theta, var, nis = np.zeros((n, 8)), np.zeros((n, 8)), np.zeros(n)
+    flag = np.zeros(n, dtype=np.int64)
+    status, row, events = tracker.run(kind, phi, z, theta, var, nis, flag)
+    tracker.store_state(*arrays)
+    if row >= 0:
+        raise ValueError(f"C++ tracker, row {row}: kind {int(kind[row])}, phi {phi[row].tolist()}, z {float(z[row])}: "
+                         f"{core.status_name(status)}: expected a kind 0..6 and finite phi, z")
+    return theta, var, nis, flag, events

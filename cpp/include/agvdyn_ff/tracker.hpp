@@ -1,0 +1,157 @@
+// agvdyn_ff::PayloadTracker: online estimate of the payload-dependent parameters m_ch and C_ch with
+// change detection, the C++ twin of agvdyn.online.tracker (the reference; its module docstring
+// states the equations, the state and the constants; docs/online.md, docs/cpp.md).
+//
+// The tracker consumes the causal rows of eq. (19) that agvdyn.online.rows builds (one per sample,
+// or none): the row's kind (chassis coordinate x sign of its velocity), the regressor entries of
+// m_ch and C_ch, and the right-hand side with every held parameter's contribution removed,
+//
+//   z = phi_m m_ch + phi_C C_ch + b_kind + noise.
+//
+// Per row: a Kalman filter with a random walk over (m_ch, C_ch, six row biases), information
+// gating (a parameter learns, and its covariance grows, only from rows that excite it), a
+// directional (Schmidt-type) update in Joseph form, the residual noise estimated online, residual
+// correlation in the row weight; four CUSUMs (m_ch from translation rows, C_ch from rotation rows,
+// both signs) whose alarm resets the changed parameter's covariance and re-estimates it from the
+// rows since the CUSUM's start (PX4-style).
+//
+// create() checks the settings once; update() is the per-sample call: fixed-size Eigen types, no
+// heap allocation, no exceptions, a Status for invalid input. The arithmetic follows the Python
+// kernels (agvdyn/online/_kernels.py) operation by operation, so both give the same numbers to
+// round-off (tests: cpp/tests/tracker_vectors.json, 1e-9 relative).
+#pragma once
+
+#include <agvdyn_ff/feedforward.hpp>
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstdint>
+
+namespace agvdyn::ff {
+
+/// Number of tracker states: m_ch, C_ch and the biases of the six kinds of row.
+constexpr int kTrackerStates = 8;
+using TrackerVector = Eigen::Matrix<double, kTrackerStates, 1>;
+using TrackerMatrix = Eigen::Matrix<double, kTrackerStates, kTrackerStates>;
+
+/// Kind of a row (agvdyn.online.rows.ROW_KINDS): the chassis coordinate of the row's motion mode and
+/// the sign of its velocity; none: no row at this sample.
+enum class RowKind : int { none = 0, x_plus = 1, x_minus = 2, y_plus = 3, y_minus = 4, gamma_plus = 5, gamma_minus = 6 };
+
+/// Label as in ROW_KINDS: "none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-"; "?" otherwise.
+const char* label(RowKind kind) noexcept;
+
+/// Constants of the tracker, defaults and meaning as agvdyn.online.TrackerSettings (relative ones
+/// are fractions of the identified values; the row rules of the Python settings belong to the rows).
+struct TrackerSettings {
+  double change_size = 0.1;            ///< delta: the step each CUSUM looks for, x value
+  double gate = 1.0;                   ///< excited when |phi_i| delta_i >= gate sqrt(R)
+  double correlation = 150.0;          ///< n_corr of translation rows (samples)
+  double rotation_correlation = 300.0; ///< n_corr of rotation rows (samples)
+  double threshold = 12.0;             ///< h: CUSUM alarm level
+  double random_walk = 1e-3;           ///< q = (random_walk x value)^2 per s
+  double bias_walk = 0.3;              ///< q_b = bias_walk^2 per s (N or N m)
+  double reset_std = 0.5;              ///< variance after a reset (prior): (reset_std x value)^2; cap of P_ii
+  double noise_time = 30.0;            ///< tau_R (s) of the noise estimate
+  int warm_rows = 500;                 ///< rows of a kind before its CUSUMs run
+  double initial_std = 0.02;           ///< least initial std, x value
+  double bias_std = 30.0;              ///< initial std of the row biases
+  double noise = 25.0;                 ///< initial residual variance R
+};
+
+/// One causal row (agvdyn.online.rows.OnlineRows at one sample).
+struct TrackerRow {
+  RowKind kind = RowKind::none;
+  double phi_m = 0;   ///< regressor entry of m_ch
+  double phi_C = 0;   ///< regressor entry of C_ch
+  double z = 0;       ///< right-hand side less the held parameters' part
+};
+
+/// A detected change (a CUSUM above the threshold): sample indices since create() or begin_log().
+struct TrackerEvent {
+  int parameter = 0;          ///< 0: m_ch, 1: C_ch
+  int sign = 0;               ///< +1 or -1: the direction of the step the CUSUM found
+  std::int64_t sample = 0;    ///< the sample whose row crossed the threshold
+  std::int64_t start = 0;     ///< the CUSUM's start: the estimated change (before the rows' delay)
+  double before = 0, before_var = 0;   ///< estimate and variance before the reset
+  double after = 0, after_var = 0;     ///< after the reset (from the rows since start)
+};
+
+/// What update() returns for one sample.
+struct TrackerOutput {
+  Vector2 estimate = Vector2::Zero();   ///< (m_ch, C_ch)
+  Vector2 std = Vector2::Zero();        ///< their standard deviations
+  double nis = 0;                       ///< normalised innovation squared; NaN without a row
+  int event = 0;                        ///< bit 0: m_ch changed, bit 1: C_ch changed (this sample)
+  int n_events = 0;                     ///< entries of events filled (0, 1 or 2)
+  std::array<TrackerEvent, 2> events{};
+};
+
+/// Online tracker of m_ch and C_ch (see the head of this file). Copyable; not thread-safe (one
+/// tracker per vehicle, updated from one thread).
+class PayloadTracker {
+ public:
+  /// The whole state (agvdyn.online.tracker.TrackerState): CUSUM index c = 2 i + s for parameter i
+  /// (0: m_ch, 1: C_ch) and sign s (0: +, 1: -).
+  struct State {
+    TrackerVector theta = TrackerVector::Zero();   ///< m_ch, C_ch, biases of x_ch+, x_ch-, y_ch+, y_ch-, gamma_ch+, gamma_ch-
+    TrackerMatrix P = TrackerMatrix::Zero();       ///< covariance of theta
+    Eigen::Vector3d R = Eigen::Vector3d::Zero();   ///< residual variance of x_ch, y_ch, gamma_ch rows
+    Eigen::Matrix<double, 9, 1> n_rows = Eigen::Matrix<double, 9, 1>::Zero();  ///< rows per kind (6), per coordinate (3)
+    std::array<double, 4> g{};                     ///< CUSUMs
+    std::array<std::int64_t, 4> start{};           ///< their window's first sample
+    std::array<TrackerMatrix, 4> Iw{};             ///< window information f f^T / R_eff
+    std::array<TrackerVector, 4> bw{};             ///< window f z / R_eff
+    std::int64_t sample = 0;                       ///< samples since create() or begin_log()
+  };
+
+  /// A tracker starting at the identified values nominal = (m_ch, C_ch) (> 0) with their stds
+  /// (>= 0; at least initial_std x value is used), for rows every dt seconds (> 0).
+  /// Status::invalid_model when a number is not finite or out of range (settings: every one > 0,
+  /// warm_rows >= 0), as Python's TrackerSettings.
+  static Status create(const Vector2& nominal, const Vector2& nominal_std, double dt, const TrackerSettings& settings,
+                       PayloadTracker* tracker) noexcept;
+
+  /// One sample: the row's update when it has one (kind != none), detection and reset; out gets
+  /// the estimates after it. The per-sample call: no heap allocation, no exceptions.
+  /// Status::unknown_row_kind (kind not in 0..6) or non_finite_input (NaN or infinity in phi_m,
+  /// phi_C, z): the row is refused and the sample counts as one without a row (out has the current
+  /// estimates, nis NaN, no event).
+  Status update(const TrackerRow& row, TrackerOutput& out) noexcept;
+
+  /// A new log of the same vehicle (agvdyn.online.track): the CUSUMs restart at zero and samples
+  /// are counted from 0 again; estimates, covariance and noise carry over.
+  void begin_log() noexcept;
+
+  /// Current estimates (m_ch, C_ch) and their stds.
+  Vector2 estimate() const noexcept { return state_.theta.head<2>(); }
+  Vector2 std() const noexcept;
+  /// Changes detected since create() (not reset by begin_log()).
+  std::int64_t event_count() const noexcept { return event_count_; }
+
+  const State& state() const noexcept { return state_; }
+  /// Replace the state (e.g. carried from Python's TrackerState or a previous run);
+  /// Status::non_finite_input when theta, P, R, n_rows, g, Iw or bw hold NaN or infinity.
+  Status set_state(const State& state) noexcept;
+
+  const TrackerSettings& settings() const noexcept { return settings_; }
+  const Vector2& nominal() const noexcept { return nominal_; }
+  double dt() const noexcept { return dt_; }
+
+ private:
+  void detect(TrackerOutput& out) noexcept;
+
+  TrackerSettings settings_{};
+  State state_{};
+  Vector2 nominal_ = Vector2::Zero();
+  double dt_ = 0;
+  // constants of the Python kernel (TrackerSettings.constants)
+  Vector2 delta_ = Vector2::Zero();      // change_size x nominal
+  Vector2 q_ = Vector2::Zero();          // (random_walk x nominal)^2 dt
+  Vector2 reset_var_ = Vector2::Zero();  // (reset_std x nominal)^2
+  double q_b_ = 0;                       // bias_walk^2
+  std::int64_t event_count_ = 0;
+};
+
+}  // namespace agvdyn::ff

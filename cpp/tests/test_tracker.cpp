@@ -1,0 +1,271 @@
+// PayloadTracker against the Python reference (agvdyn.online.tracker) on the shared vectors
+// (tracker_vectors.json + data/tracker_sequence.csv, written by make_vectors.py): every output of
+// every sample to 1e-9 relative, the events, the final state; plus its own properties: no heap
+// allocation per update, status codes, begin_log, set_state.
+#include <agvdyn_ff/tracker.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "document.hpp"
+
+namespace ff = agvdyn::ff;
+using agvdyn::ff::detail::Node;
+
+long agvdyn_ff_test_allocations();  // test_feedforward.cpp: operator new calls so far
+
+namespace {
+
+struct Sample {
+  int log = 0;
+  ff::TrackerRow row;
+  double m_ch = 0, C_ch = 0, m_std = 0, C_std = 0, nis = 0;
+  int event = 0;
+};
+
+struct TrackerVectors {
+  Node root;
+  std::vector<Sample> samples;
+  double relative = 0;
+  ff::TrackerSettings settings;
+  ff::Vector2 nominal = ff::Vector2::Zero(), nominal_std = ff::Vector2::Zero();
+  double dt = 0;
+};
+
+double number(const Node* node) {
+  double v = 0;
+  EXPECT_TRUE(node != nullptr && node->number(&v)) << (node ? node->text : std::string("missing key"));
+  return v;
+}
+
+std::vector<double> numbers(const Node* node) {
+  std::vector<double> out;
+  if (node == nullptr || !node->is_sequence()) {
+    ADD_FAILURE() << "expected a list";
+    return out;
+  }
+  for (const Node& v : node->values) out.push_back(number(&v));
+  return out;
+}
+
+const TrackerVectors& vectors() {
+  static TrackerVectors v = [] {
+    TrackerVectors out;
+    std::string error;
+    const std::string dir = AGVDYN_FF_TEST_DATA;
+    if (!agvdyn::ff::detail::read_document(dir + "/tracker_vectors.json", &out.root, &error)) {
+      ADD_FAILURE() << error;
+      return out;
+    }
+    out.relative = number(out.root.find("tolerance")->find("relative"));
+    const Node& s = *out.root.find("settings");
+    ff::TrackerSettings& t = out.settings;
+    t.change_size = number(s.find("change_size"));
+    t.gate = number(s.find("gate"));
+    t.correlation = number(s.find("correlation"));
+    t.rotation_correlation = number(s.find("rotation_correlation"));
+    t.threshold = number(s.find("threshold"));
+    t.random_walk = number(s.find("random_walk"));
+    t.bias_walk = number(s.find("bias_walk"));
+    t.reset_std = number(s.find("reset_std"));
+    t.noise_time = number(s.find("noise_time"));
+    t.warm_rows = static_cast<int>(number(s.find("warm_rows")));
+    t.initial_std = number(s.find("initial_std"));
+    t.bias_std = number(s.find("bias_std"));
+    t.noise = number(s.find("noise"));
+    const auto nominal = numbers(out.root.find("nominal")), nominal_std = numbers(out.root.find("nominal_std"));
+    out.nominal = ff::Vector2(nominal.at(0), nominal.at(1));
+    out.nominal_std = ff::Vector2(nominal_std.at(0), nominal_std.at(1));
+    out.dt = number(out.root.find("dt"));
+    std::ifstream in(dir + "/" + out.root.find("sequence")->text);
+    std::string line;
+    if (!std::getline(in, line) || line != "log,kind,phi_m,phi_C,z,m_ch,C_ch,m_ch_std,C_ch_std,nis,event") {
+      ADD_FAILURE() << "tracker sequence: unexpected header " << line;
+      return out;
+    }
+    while (std::getline(in, line)) {
+      if (line.empty()) continue;
+      double c[11];
+      const char* p = line.c_str();
+      for (int k = 0; k < 11; ++k) {
+        char* end = nullptr;
+        c[k] = std::strtod(p, &end);
+        if (end == p) {
+          ADD_FAILURE() << "tracker sequence: bad number in " << line;
+          return out;
+        }
+        p = *end == ',' ? end + 1 : end;
+      }
+      Sample smp;
+      smp.log = static_cast<int>(c[0]);
+      smp.row = ff::TrackerRow{static_cast<ff::RowKind>(static_cast<int>(c[1])), c[2], c[3], c[4]};
+      smp.m_ch = c[5];
+      smp.C_ch = c[6];
+      smp.m_std = c[7];
+      smp.C_std = c[8];
+      smp.nis = c[9];
+      smp.event = static_cast<int>(c[10]);
+      out.samples.push_back(smp);
+    }
+    return out;
+  }();
+  return v;
+}
+
+// |x - ref| / max(|ref|, 1), asserting the vectors' rule
+double deviation(double x, double ref, double relative, const char* what, std::size_t k) {
+  if (std::isnan(ref)) {
+    EXPECT_TRUE(std::isnan(x)) << what << " at sample " << k << ": " << x << ", expected NaN";
+    return 0;
+  }
+  const double d = std::abs(x - ref) / std::max(std::abs(ref), 1.0);
+  EXPECT_LE(d, relative) << what << " at sample " << k << ": " << x << " vs " << ref;
+  return d;
+}
+
+ff::PayloadTracker make(const TrackerVectors& v) {
+  ff::PayloadTracker tracker;
+  EXPECT_EQ(ff::PayloadTracker::create(v.nominal, v.nominal_std, v.dt, v.settings, &tracker), ff::Status::ok);
+  return tracker;
+}
+
+}  // namespace
+
+TEST(TrackerVectors, SequenceHasBothLogsStepsAndEveryKind) {
+  const TrackerVectors& v = vectors();
+  ASSERT_GE(v.samples.size(), 5000u);
+  int kinds[7] = {0, 0, 0, 0, 0, 0, 0};
+  for (const Sample& s : v.samples) ++kinds[static_cast<int>(s.row.kind)];
+  for (int k = 0; k < 7; ++k) EXPECT_GT(kinds[k], 100) << ff::label(static_cast<ff::RowKind>(k));
+  EXPECT_GE(v.root.find("events")->values.size(), 3u);
+}
+
+TEST(TrackerVectors, EveryOutputEqualsThePythonReference) {
+  const TrackerVectors& v = vectors();
+  ASSERT_FALSE(v.samples.empty());
+  ff::PayloadTracker tracker = make(v);
+  std::vector<std::pair<int, ff::TrackerEvent>> events;
+  double worst = 0;
+  int log = 0;
+  ff::TrackerOutput out;
+  for (std::size_t k = 0; k < v.samples.size(); ++k) {
+    const Sample& s = v.samples[k];
+    if (s.log != log) {
+      tracker.begin_log();
+      log = s.log;
+    }
+    ASSERT_EQ(tracker.update(s.row, out), ff::Status::ok) << "sample " << k;
+    worst = std::max(worst, deviation(out.estimate[0], s.m_ch, v.relative, "m_ch", k));
+    worst = std::max(worst, deviation(out.estimate[1], s.C_ch, v.relative, "C_ch", k));
+    worst = std::max(worst, deviation(out.std[0], s.m_std, v.relative, "m_ch_std", k));
+    worst = std::max(worst, deviation(out.std[1], s.C_std, v.relative, "C_ch_std", k));
+    worst = std::max(worst, deviation(out.nis, s.nis, v.relative, "nis", k));
+    ASSERT_EQ(out.event, s.event) << "sample " << k;
+    for (int e = 0; e < out.n_events; ++e) events.emplace_back(log, out.events[static_cast<std::size_t>(e)]);
+  }
+  // events
+  const Node& ref_events = *v.root.find("events");
+  ASSERT_EQ(events.size(), ref_events.values.size());
+  for (std::size_t k = 0; k < events.size(); ++k) {
+    const Node& r = ref_events.values[k];
+    const ff::TrackerEvent& e = events[k].second;
+    EXPECT_EQ(events[k].first, static_cast<int>(number(r.find("log"))));
+    EXPECT_EQ(e.parameter, static_cast<int>(number(r.find("parameter"))));
+    EXPECT_EQ(e.sign, static_cast<int>(number(r.find("sign"))));
+    EXPECT_EQ(e.sample, static_cast<std::int64_t>(number(r.find("sample"))));
+    EXPECT_EQ(e.start, static_cast<std::int64_t>(number(r.find("start"))));
+    worst = std::max(worst, deviation(e.before, number(r.find("before")), v.relative, "event before", k));
+    worst = std::max(worst, deviation(e.before_var, number(r.find("before_var")), v.relative, "event before_var", k));
+    worst = std::max(worst, deviation(e.after, number(r.find("after")), v.relative, "event after", k));
+    worst = std::max(worst, deviation(e.after_var, number(r.find("after_var")), v.relative, "event after_var", k));
+  }
+  EXPECT_EQ(tracker.event_count(), static_cast<std::int64_t>(events.size()));
+  // final state
+  const Node& f = *v.root.find("final");
+  const ff::PayloadTracker::State& st = tracker.state();
+  const auto theta = numbers(f.find("theta")), P = numbers(f.find("P")), R = numbers(f.find("R")),
+             n_rows = numbers(f.find("n_rows")), g = numbers(f.find("g")), start = numbers(f.find("start"));
+  ASSERT_EQ(theta.size(), 8u);
+  ASSERT_EQ(P.size(), 64u);
+  for (std::size_t k = 0; k < 8; ++k) worst = std::max(worst, deviation(st.theta[k], theta[k], v.relative, "final theta", k));
+  for (std::size_t k = 0; k < 64; ++k) {
+    worst = std::max(worst, deviation(st.P(k / 8, k % 8), P[k], v.relative, "final P", k));
+  }
+  for (std::size_t k = 0; k < 3; ++k) worst = std::max(worst, deviation(st.R[k], R[k], v.relative, "final R", k));
+  for (std::size_t k = 0; k < 9; ++k) EXPECT_EQ(st.n_rows[k], n_rows.at(k));
+  for (std::size_t k = 0; k < 4; ++k) {
+    worst = std::max(worst, deviation(st.g[k], g.at(k), v.relative, "final g", k));
+    EXPECT_EQ(st.start[k], static_cast<std::int64_t>(start.at(k)));
+  }
+  RecordProperty("max_relative_deviation", std::to_string(worst));
+  std::printf("[ tracker  ] %zu samples, %zu events, largest relative deviation %.3g\n", v.samples.size(), events.size(),
+              worst);
+}
+
+TEST(Tracker, UpdateDoesNotAllocate) {
+  const TrackerVectors& v = vectors();
+  ff::PayloadTracker tracker = make(v);
+  ff::TrackerOutput out;
+  const long before = agvdyn_ff_test_allocations();
+  for (const Sample& s : v.samples) tracker.update(s.row, out);
+  tracker.begin_log();
+  EXPECT_EQ(agvdyn_ff_test_allocations() - before, 0);
+}
+
+TEST(Tracker, RefusesBadRowsAndSettings) {
+  const TrackerVectors& v = vectors();
+  ff::PayloadTracker tracker = make(v);
+  ff::TrackerOutput out;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(tracker.update(ff::TrackerRow{static_cast<ff::RowKind>(7), 0.1, 0.0, 1.0}, out), ff::Status::unknown_row_kind);
+  EXPECT_STREQ(ff::to_string(ff::Status::unknown_row_kind), "unknown_row_kind");
+  EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::x_plus, nan, 0.0, 1.0}, out), ff::Status::non_finite_input);
+  EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::gamma_minus, 0.0, 0.2, INFINITY}, out), ff::Status::non_finite_input);
+  EXPECT_TRUE(std::isnan(out.nis));
+  EXPECT_EQ(out.estimate, v.nominal);  // refused rows leave the state
+  EXPECT_EQ(tracker.state().n_rows.sum(), 0.0);
+  EXPECT_EQ(tracker.state().sample, 3);  // but count as samples
+  EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::none, nan, nan, nan}, out), ff::Status::ok);
+  ff::PayloadTracker bad;
+  ff::TrackerSettings s = v.settings;
+  s.threshold = 0;
+  EXPECT_EQ(ff::PayloadTracker::create(v.nominal, v.nominal_std, v.dt, s, &bad), ff::Status::invalid_model);
+  EXPECT_EQ(ff::PayloadTracker::create(ff::Vector2(-1, 2), v.nominal_std, v.dt, v.settings, &bad), ff::Status::invalid_model);
+  EXPECT_EQ(ff::PayloadTracker::create(v.nominal, ff::Vector2(nan, 0), v.dt, v.settings, &bad), ff::Status::invalid_model);
+  EXPECT_EQ(ff::PayloadTracker::create(v.nominal, v.nominal_std, 0.0, v.settings, &bad), ff::Status::invalid_model);
+  EXPECT_EQ(ff::PayloadTracker::create(v.nominal, v.nominal_std, v.dt, v.settings, nullptr), ff::Status::invalid_model);
+  ff::PayloadTracker::State st = tracker.state();
+  st.P(3, 3) = nan;
+  EXPECT_EQ(tracker.set_state(st), ff::Status::non_finite_input);
+}
+
+TEST(Tracker, InitialStateAndStateRoundTrip) {
+  const TrackerVectors& v = vectors();
+  ff::PayloadTracker a = make(v);
+  const auto& st = a.state();
+  EXPECT_EQ(st.theta.head<2>(), v.nominal);
+  EXPECT_DOUBLE_EQ(a.std()[0], std::max(v.nominal_std[0], v.settings.initial_std * v.nominal[0]));
+  EXPECT_DOUBLE_EQ(std::sqrt(st.P(5, 5)), v.settings.bias_std);
+  EXPECT_EQ(st.R, Eigen::Vector3d::Constant(v.settings.noise));
+  // a tracker given another's state continues identically
+  ff::TrackerOutput out_a, out_b;
+  const std::size_t half = 1500;
+  for (std::size_t k = 0; k < half; ++k) a.update(v.samples[k].row, out_a);
+  ff::PayloadTracker b = make(v);
+  ASSERT_EQ(b.set_state(a.state()), ff::Status::ok);
+  for (std::size_t k = half; k < 3000; ++k) {
+    a.update(v.samples[k].row, out_a);
+    b.update(v.samples[k].row, out_b);
+  }
+  EXPECT_EQ(out_a.estimate, out_b.estimate);
+  EXPECT_EQ(a.state().P, b.state().P);
+  EXPECT_STREQ(ff::label(ff::RowKind::gamma_minus), "gamma_ch-");
+}
