@@ -118,7 +118,7 @@ def test_planner_undetermined_group_is_infinite_on_any_machine():
 
 
 def test_predicted_relative_std_of_a_singular_system_is_infinite():
-    from agvdyn.identification.fit import predicted_relative_std
+    from agvdyn.identification.excitation import predicted_relative_std
     from agvdyn.identification.normal import RegressionData
 
     rng = np.random.default_rng(3)

@@ -151,3 +151,17 @@ def test_identify_change_detector_names_the_time(identified):
     assert abs(found[0].t - 64.0) < 2.0
     assert found[0].size["m_ch"] == pytest.approx(250.0, rel=0.3)
     assert json.dumps(found[0].to_dict())
+
+
+def test_identify_warns_and_reports_parameter_change(identified):
+    """identify itself (on the rows it keeps per recording, not the blocks): the load step is named in
+    a warning and in ``parameter_change`` (time within 2 s, the size of m_ch within 30 %, C_ch untested
+    where one side has no rotation: None, never a zero std); the effect-free log gives null and no warning."""
+    free, step = identified["free"], identified["step"]
+    assert free.parameter_change is None and not any("parameter change" in w for w in free.warnings)
+    change = step.parameter_change
+    assert change is not None and abs(change["t"] - 64.0) < 2.0
+    assert change["size"]["m_ch"] == pytest.approx(250.0, rel=0.3) and change["std"]["m_ch"] > 0
+    assert change["std"]["C_ch"] is None or change["std"]["C_ch"] > 0
+    assert any("parameter change" in w and "agvdyn track" in w for w in step.warnings)
+    assert json.loads(json.dumps(step.to_json_dict()))["parameter_change"]["t"] == change["t"]

@@ -35,7 +35,7 @@ from agvdyn.determinacy import std_from_covariance
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.platform import PARAMETER_NAMES
 
-__all__ = ["ParameterChange", "parameter_change"]
+__all__ = ["ParameterChange", "parameter_change", "parameter_change_in_store"]
 
 _TRACKED = ("m_ch", "C_ch")
 
@@ -43,21 +43,23 @@ _TRACKED = ("m_ch", "C_ch")
 @dataclass(frozen=True)
 class ParameterChange:
     """A change found within a recording: its time ``t`` (s, the recording's clock), the statistic,
-    and the step ``size`` of m_ch and C_ch (after minus before) with its ``std``."""
+    and the step ``size`` of m_ch and C_ch (after minus before) with its ``std`` (None for a parameter
+    the split does not test: no information on one side)."""
 
     recording: str
     t: float
     statistic: float
     threshold: float
-    size: dict[str, float]
-    std: dict[str, float]
+    size: dict[str, float | None]
+    std: dict[str, float | None]
     before: dict[str, float]
 
     def to_dict(self) -> dict[str, Any]:
         return {"recording": self.recording, "t": self.t, "statistic": self.statistic, "threshold": self.threshold,
                 "size": dict(self.size), "std": dict(self.std), "before": dict(self.before),
-                "hint": "the parameters changed within the recording: identify each part alone, or follow "
-                        "them with 'agvdyn track' (docs/online.md)"}
+                "hint": "the chassis equations change within the recording: a load change (identify each part "
+                        "alone, or follow it with 'agvdyn track', docs/online.md), or another effect the model "
+                        "lacks (wheel slip, a drive fault)"}
 
 
 def _stack(blocks: Sequence[EquationBlock], offsets: bool) -> tuple[np.ndarray, ...]:
@@ -122,7 +124,8 @@ def _split_inverse(A: np.ndarray, total: np.ndarray, min_information: float) -> 
     information after the split, net of the fit, is below ``min_information`` of its total (no rows
     of it on one side) is left out (its row and column zero), so the test has 2, 1 or 0 dof."""
     inv = np.zeros_like(A)
-    use = np.diagonal(A, axis1=1, axis2=2) >= min_information * total
+    diag = np.diagonal(A, axis1=1, axis2=2)
+    use = (diag >= min_information * total) & (diag > 0)  # none of a parameter's rows in the recording: untested
     both = use[:, 0] & use[:, 1]
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] ** 2
     both &= det > 1e-9 * A[:, 0, 0] * A[:, 1, 1]
@@ -134,6 +137,35 @@ def _split_inverse(A: np.ndarray, total: np.ndarray, min_information: float) -> 
     return inv
 
 
+def _test(name: str, t: np.ndarray, X: np.ndarray, y: np.ndarray, cls: np.ndarray, coef: np.ndarray,
+          cols: list[int], threshold: float, min_relative: float, step: float, guard: float,
+          min_information: float) -> ParameterChange | None:
+    """The split test of one recording's kept rows (time order), ``coef`` the identification's estimate."""
+    if t.size < 100 or t[-1] - t[0] <= 2 * guard + step:
+        return None
+    w = _weights(y - X @ coef, cls)
+    Xw = X * w[:, None]
+    fitted = np.linalg.lstsq(X.T @ Xw, Xw.T @ y, rcond=None)[0]  # the weighted fit the test extends
+    e = y - X @ fitted
+    grid, b, A = _scan(t, X, e, w, cols, step, guard)
+    if grid.size == 0:
+        return None
+    inv = _split_inverse(A, np.einsum("ni,ni->i", X[:, cols] * w[:, None], X[:, cols]), min_information)
+    stat = np.einsum("mi,mij,mj->m", b, inv, b)
+    k = int(np.argmax(stat))
+    delta = inv[k] @ b[k]
+    std = std_from_covariance(inv[k], list(_TRACKED))[0]  # a negative variance is inf, never 0
+    value = coef[cols]
+    tested = np.diagonal(inv[k]) > 0
+    if not (stat[k] > threshold and (tested & (np.abs(delta) >= min_relative * np.abs(value))).any()):
+        return None
+    # a parameter without information on one side is not tested there: no size, no std
+    return ParameterChange(name, float(grid[k]), float(stat[k]), threshold,
+                           {n: float(d) if u else None for n, d, u in zip(_TRACKED, delta, tested)},
+                           {n: float(e) if u else None for n, e, u in zip(_TRACKED, std, tested)},
+                           dict(zip(_TRACKED, value.tolist())))
+
+
 def parameter_change(blocks: Sequence[EquationBlock], parameters: np.ndarray, *, offsets: np.ndarray | None = None,
                      threshold: float = 8.0, min_relative: float = 0.03, step: float = 0.1, guard: float = 2.0,
                      min_information: float = 0.15) -> list[ParameterChange]:
@@ -143,31 +175,32 @@ def parameter_change(blocks: Sequence[EquationBlock], parameters: np.ndarray, *,
     recording's ends; a parameter with less than ``min_information`` of its information on either
     side of a candidate is not tested there. Returns one :class:`ParameterChange` per recording with a change (empty: none)."""
     p = np.asarray(parameters, dtype=float)
+    coef = p if offsets is None else np.concatenate([p, offsets])
     cols = [PARAMETER_NAMES.index(n) for n in _TRACKED]
     by_recording: dict[str, list[EquationBlock]] = {}
     for b in blocks:
         by_recording.setdefault(b.recording, []).append(b)
+    found = (_test(name, *_stack(group, offsets is not None), coef, cols, threshold, min_relative, step, guard,
+                   min_information) for name, group in by_recording.items())
+    return [c for c in found if c is not None]
+
+
+def parameter_change_in_store(store: Any, theta: np.ndarray, timing: Sequence[tuple[str, float, float]], *,
+                              threshold: float = 8.0, min_relative: float = 0.03, step: float = 0.1,
+                              guard: float = 2.0, min_information: float = 0.15) -> list[ParameterChange]:
+    """:func:`parameter_change` on the rows an identification keeps per continuous recording (its
+    :class:`~agvdyn.identification.store.RowStore`, read back one recording at a time, so memory stays
+    that of the fit): ``theta`` the full estimate (11 parameters, then the offsets when the store has
+    their columns), ``timing`` per recording its log's name, first time and nominal sample time (a
+    row's time is ``t0 + step * dt``: the log's clock where it has no dropout)."""
+    theta = np.asarray(theta, dtype=float)
+    cols = [PARAMETER_NAMES.index(n) for n in _TRACKED]
     found = []
-    for name, group in by_recording.items():
-        t, X, y, cls = _stack(group, offsets is not None)
-        if t.size < 100 or t[-1] - t[0] <= 2 * guard + step:
-            continue
-        coef = p if offsets is None else np.concatenate([p, offsets])
-        w = _weights(y - X @ coef, cls)
-        Xw = X * w[:, None]
-        coef = np.linalg.lstsq(X.T @ Xw, Xw.T @ y, rcond=None)[0]  # the weighted fit the test extends
-        e = y - X @ coef
-        grid, b, A = _scan(t, X, e, w, cols, step, guard)
-        if grid.size == 0:
-            continue
-        inv = _split_inverse(A, np.einsum("ni,ni->i", X[:, cols] * w[:, None], X[:, cols]), min_information)
-        stat = np.einsum("mi,mij,mj->m", b, inv, b)
-        k = int(np.argmax(stat))
-        delta = inv[k] @ b[k]
-        std = std_from_covariance(inv[k], list(_TRACKED))[0]  # a negative variance is inf, never 0
-        big = np.abs(delta) >= min_relative * np.abs(p[cols])
-        if stat[k] > threshold and big.any():
-            found.append(ParameterChange(name, float(grid[k]), float(stat[k]), threshold,
-                                         dict(zip(_TRACKED, delta.tolist())), dict(zip(_TRACKED, std.tolist())),
-                                         dict(zip(_TRACKED, p[cols].tolist()))))
+    for rec, (name, t0, dt) in zip(store.free_rows(list(range(theta.size)), np.zeros(theta.size)), timing):
+        order = np.argsort(rec.step, kind="stable")
+        cls = rec.group if rec.key is None else rec.key
+        change = _test(name, t0 + rec.step[order] * dt, rec.A[order], rec.y[order], cls[order], theta, cols,
+                       threshold, min_relative, step, guard, min_information)
+        if change is not None:
+            found.append(change)
     return found

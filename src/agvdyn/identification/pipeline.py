@@ -18,6 +18,7 @@ import numpy as np
 
 from agvdyn.identification._threads import default_workers, ordered_map
 from agvdyn.identification.account import LogRows, RowAccount
+from agvdyn.identification.change import parameter_change_in_store
 from agvdyn.identification.fit import check_fixed, columns, fit_blocks, fit_regression
 from agvdyn.identification.normal import LogReduction, RowStatistics, RowStore, merge_reduction, reduce_blocks, regression_data
 from agvdyn.identification.plausibility import (
@@ -30,7 +31,7 @@ from agvdyn.identification.plausibility import (
 from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
 from agvdyn.identification.rows import log_rows
-from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
+from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import log_source
 from agvdyn.identification.workspace import Workspace, keep_freed_memory
 from agvdyn.io import Log, LogFile, load_logs, sidecar_platform
@@ -230,13 +231,16 @@ def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, fl
     stats, store, names = RowStatistics(len(p_fixed), columns=order), RowStore(columns=order), {}
     account = RowAccount()
     consumed = 0  # own rows of the earlier pieces of a long log: the sample index of this piece's first own row
+    timing: list[tuple[str, float, float]] = []  # per stored recording: log, first time, sample time
     try:
         for log, core, rows, reduction in _reduced_logs(jobs, geometry, settings, len(p_fixed), order, workers,
                                                         reuse=not keep_blocks):
             source = str(getattr(log, "path", None) or "<log>")
-            if core is not None and (not account.sources or account.sources[-1] != source):
-                consumed = 0
+            if core is None or not account.sources or account.sources[-1] != source:
+                consumed, t0 = 0, float(log.t[0])
+            stored = len(store)
             merge_reduction(reduction, stats, store, names, step_offset=0 if core is None else consumed - core.start)
+            timing += [(source, t0, log.sample_time)] * (len(store) - stored)
             if core is not None:
                 consumed += core.stop - core.start
             account.add(rows, source, piece=core is not None, keep_blocks=keep_blocks)
@@ -249,10 +253,30 @@ def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, fl
         data = regression_data(stats, names, idx_free, p_fixed, store)
         ident = fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, account=account,
                                workers=workers)
+        ident = _with_parameter_change(ident, store, timing)
         total = sum(ident.residual_rms.get(f"{s}:{c}", 0.0) ** 2 * n for (s, c), n in zip(data.keys, data.key_rows))
         return ident, math.sqrt(total / data.n_rows)
     finally:
         store.close()
+
+
+def _with_parameter_change(ident: Identification, store: RowStore, timing: list[tuple[str, float, float]]
+                           ) -> Identification:
+    """The identification with the m_ch / C_ch change found within a recording, if any
+    (:func:`.change.parameter_change_in_store`): a warning naming the time, and ``parameter_change``."""
+    theta = ident.parameters.to_vector()
+    if ident.offsets:
+        theta = np.concatenate([theta, [ident.offsets[n] for n in OFFSET_NAMES]])
+    changes = parameter_change_in_store(store, theta, timing)
+    if not changes:
+        return ident
+    first = changes[0]
+    size = ", ".join(f"{n} {v:+.4g} +- {first.std[n]:.2g}" for n, v in first.size.items() if v is not None)
+    warning = (f"parameter change within {first.recording} at t = {first.t:.1f} s: the chassis equations change "
+               f"as if {size}; a load picked up or dropped, or another effect the model lacks (wheel slip, a drive "
+               "fault); the parameters average both parts. If the load changed, identify each part alone or follow "
+               "it with agvdyn track (docs/online.md)")
+    return dataclasses.replace(ident, parameter_change=first.to_dict(), warnings=ident.warnings + (warning,))
 
 
 def _diagnosis(exc: Exception, items: Sequence[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],

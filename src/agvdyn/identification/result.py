@@ -124,6 +124,8 @@ class Identification:
     active_bounds: tuple[str, ...] = ()
     downweighted_rows: int = 0
     quantiles: dict[str, float] = field(default_factory=dict)  # of ci95 per parameter; default 1.96
+    #: m_ch / C_ch changed within a recording (:func:`.change.parameter_change_in_store`): time, size, std
+    parameter_change: dict[str, Any] | None = None
 
     def ci95(self, name: str) -> tuple[float, float] | None:
         """95 % interval ``value +- q std`` of an estimated parameter (q: Student's t of the
@@ -225,6 +227,7 @@ class Identification:
             "sources": list(self.sources),
             "notes": list(self.notes),
             "warnings": list(self.warnings),
+            "parameter_change": self.parameter_change,
             "platform": self.geometry.to_dict(),
             **self._data_account(),
         }
