@@ -102,6 +102,23 @@ def _correlation_length(e: np.ndarray, max_lag: int = 400) -> float:
     return float(1.0 + 2.0 * rho[1:stop].sum())
 
 
+def _tail_sums(idx: np.ndarray, n: int, terms, chunk: int = 1 << 16) -> np.ndarray:
+    """``sum_{r >= i} terms(r)`` at each row index i of ``idx`` (ascending), the per-row terms formed
+    ``chunk`` rows at a time by ``terms(slice)``: rows are summed per interval between grid indices
+    (``np.add.reduceat``), then the intervals from the end (memory and work of the grid, not one
+    cumulative array per row)."""
+    S = None
+    for a in range(0, n, chunk):
+        T = terms(slice(a, min(n, a + chunk)))
+        k = np.searchsorted(idx, np.arange(a, a + T.shape[0]), side="right")  # grid indices <= the row
+        starts = np.flatnonzero(np.diff(k, prepend=-1))
+        if S is None:
+            S = np.zeros((idx.size + 1,) + T.shape[1:])
+        S[k[starts]] += np.add.reduceat(T, starts, axis=0)
+    tail = np.cumsum(S[::-1], axis=0)[::-1]  # tail[j]: rows with more than j grid indices at or before them
+    return tail[1:]
+
+
 def _scan(t: np.ndarray, X: np.ndarray, e: np.ndarray, w: np.ndarray, cols: list[int], step: float, guard: float
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Candidate times, b (m, 2) and A (m, 2, 2) of the weighted score test at each (``e`` the
@@ -109,12 +126,13 @@ def _scan(t: np.ndarray, X: np.ndarray, e: np.ndarray, w: np.ndarray, cols: list
     Z = X[:, cols]
     Zw = Z * w[:, None]
     G = np.linalg.pinv(X.T @ (X * w[:, None]))
-    tail = lambda a: np.cumsum(a[::-1], axis=0)[::-1]  # noqa: E731  sums from each row to the end
     grid = np.arange(t[0] + guard, t[-1] - guard, step)
     idx = np.searchsorted(t, grid)
-    zz = tail(np.einsum("ni,nj->nij", Zw, Z))[idx]
-    zx = tail(np.einsum("ni,nj->nij", Zw, X))[idx]
-    b = tail(Zw * e[:, None])[idx]
+    if grid.size == 0:
+        return grid, np.zeros((0, 2)), np.zeros((0, 2, 2))
+    zz = _tail_sums(idx, t.size, lambda r: np.einsum("ni,nj->nij", Zw[r], Z[r]))
+    zx = _tail_sums(idx, t.size, lambda r: np.einsum("ni,nj->nij", Zw[r], X[r]))
+    b = _tail_sums(idx, t.size, lambda r: Zw[r] * e[r, None])
     A = zz - np.einsum("mip,pq,mjq->mij", zx, G, zx)
     return grid, b, A
 
@@ -186,21 +204,31 @@ def parameter_change(blocks: Sequence[EquationBlock], parameters: np.ndarray, *,
 
 
 def parameter_change_in_store(store: Any, theta: np.ndarray, timing: Sequence[tuple[str, float, float]], *,
-                              threshold: float = 8.0, min_relative: float = 0.03, step: float = 0.1,
-                              guard: float = 2.0, min_information: float = 0.15) -> list[ParameterChange]:
+                              rows: Sequence[int] | None = None, workers: int = 1, threshold: float = 8.0,
+                              min_relative: float = 0.03, step: float = 0.1, guard: float = 2.0,
+                              min_information: float = 0.15) -> list[ParameterChange]:
     """:func:`parameter_change` on the rows an identification keeps per continuous recording (its
     :class:`~agvdyn.identification.store.RowStore`, read back one recording at a time, so memory stays
     that of the fit): ``theta`` the full estimate (11 parameters, then the offsets when the store has
     their columns), ``timing`` per recording its log's name, first time and nominal sample time (a
-    row's time is ``t0 + step * dt``: the log's clock where it has no dropout)."""
+    row's time is ``t0 + step * dt``: the log's clock where it has no dropout). ``rows``: the group codes
+    of the rows tested (None: all); :func:`identify` tests the chassis rows, the only ones that carry
+    m_ch and C_ch (the steering rows would only sharpen the other parameters, at twice the cost).
+    The recordings are tested in up to ``workers`` threads."""
+    from agvdyn.identification._threads import ordered_map
+
     theta = np.asarray(theta, dtype=float)
     cols = [PARAMETER_NAMES.index(n) for n in _TRACKED]
-    found = []
-    for rec, (name, t0, dt) in zip(store.free_rows(list(range(theta.size)), np.zeros(theta.size)), timing):
+
+    def test(job: tuple[Any, tuple[str, float, float]]) -> ParameterChange | None:
+        rows_of, (name, t0, dt) = job
+        rec = rows_of()
         order = np.argsort(rec.step, kind="stable")
+        if rows is not None:
+            order = order[np.isin(rec.group[order], rows)]
         cls = rec.group if rec.key is None else rec.key
-        change = _test(name, t0 + rec.step[order] * dt, rec.A[order], rec.y[order], cls[order], theta, cols,
-                       threshold, min_relative, step, guard, min_information)
-        if change is not None:
-            found.append(change)
-    return found
+        return _test(name, t0 + rec.step[order] * dt, rec.A[order], rec.y[order], cls[order], theta, cols,
+                     threshold, min_relative, step, guard, min_information)
+
+    jobs = zip(store.free_jobs(list(range(theta.size)), np.zeros(theta.size)), timing)
+    return [c for c in ordered_map(test, jobs, workers, "agvdyn-change") if c is not None]

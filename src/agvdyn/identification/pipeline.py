@@ -31,7 +31,7 @@ from agvdyn.identification.plausibility import (
 from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
 from agvdyn.identification.rows import log_rows
-from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
+from agvdyn.identification.settings import CHASSIS_COORDINATES, DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import log_source
 from agvdyn.identification.workspace import Workspace, keep_freed_memory
 from agvdyn.io import Log, LogFile, load_logs, sidecar_platform
@@ -253,21 +253,22 @@ def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, fl
         data = regression_data(stats, names, idx_free, p_fixed, store)
         ident = fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, account=account,
                                workers=workers)
-        ident = _with_parameter_change(ident, store, timing)
+        chassis = [code for code, name in enumerate(data.group_names) if name in CHASSIS_COORDINATES]
+        ident = _with_parameter_change(ident, store, timing, chassis, workers)
         total = sum(ident.residual_rms.get(f"{s}:{c}", 0.0) ** 2 * n for (s, c), n in zip(data.keys, data.key_rows))
         return ident, math.sqrt(total / data.n_rows)
     finally:
         store.close()
 
 
-def _with_parameter_change(ident: Identification, store: RowStore, timing: list[tuple[str, float, float]]
-                           ) -> Identification:
+def _with_parameter_change(ident: Identification, store: RowStore, timing: list[tuple[str, float, float]],
+                           chassis: list[int], workers: int = 1) -> Identification:
     """The identification with the m_ch / C_ch change found within a recording, if any
     (:func:`.change.parameter_change_in_store`): a warning naming the time, and ``parameter_change``."""
     theta = ident.parameters.to_vector()
     if ident.offsets:
         theta = np.concatenate([theta, [ident.offsets[n] for n in OFFSET_NAMES]])
-    changes = parameter_change_in_store(store, theta, timing)
+    changes = parameter_change_in_store(store, theta, timing, rows=chassis, workers=workers)
     if not changes:
         return ident
     first = changes[0]
