@@ -21,7 +21,9 @@ step in (m_ch, C_ch) with the std ``sqrt(diag(A^-1))``. A change is reported whe
 least ``min_relative`` of the value.
 
 Each recording (``EquationBlock.recording``: one continuous log) is tested on its own; only the
-chassis rows carry m_ch and C_ch, but every kept row enters the projection.
+chassis rows carry m_ch and C_ch: :func:`parameter_change` projects on every kept row,
+:func:`parameter_change_in_store` (what ``identify`` runs, on the rows its fit keeps) on the chassis
+rows alone, at half the cost.
 """
 from __future__ import annotations
 
