@@ -4,16 +4,24 @@ __all__ = ["Geometry", "Parameters", "PARAMETER_NAMES", "PAPER_PARAMETERS", "PRO
 
 def __getattr__(name: str):
     """The names of ``__all__`` from agvdyn.platform on first use: importing agvdyn (and the CLI, whose
-    ``--help`` must answer fast) does not import numpy."""
+    ``--help`` must answer fast) does not import numpy. ``__version__`` is looked up on first use too:
+    importlib.metadata costs 40-90 ms of every command's start-up."""
     if name in __all__:
         from agvdyn import platform
 
         return getattr(platform, name)
+    if name == "__version__":
+        global __version__
+        __version__ = _installed_version()
+        return __version__
     raise AttributeError(f"module 'agvdyn' has no attribute {name!r}")
 
-try:  # the installed distribution's version (pyproject.toml), one source of truth
-    from importlib.metadata import PackageNotFoundError as _NotFound, version as _version
 
-    __version__ = _version("agvdyn")
-except _NotFound:  # running from a source tree that is not installed
-    __version__ = "0+unknown"
+def _installed_version() -> str:
+    """The installed distribution's version (pyproject.toml), one source of truth."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("agvdyn")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "0+unknown"

@@ -2,7 +2,8 @@
 
 Every command that takes a log calls :func:`load_log`; see ``docs/io.md``.
 """
-from agvdyn.io.bag import is_bag, read_bag, write_bag
+from agvdyn.io.bag import is_bag, read_bag
+from agvdyn.io.bag_write import write_bag
 from agvdyn.io.load import load_log
 from agvdyn.io.log import (
     LOG_COLUMNS,

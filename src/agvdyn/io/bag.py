@@ -16,9 +16,6 @@ their own rate, not that of the interleaved message stream.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -37,8 +34,8 @@ from agvdyn.io._convert import (
     uniform_grid,
 )
 from agvdyn.io.log import MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, _check
-from agvdyn.io.mapping import HEADING_QUANTITIES, InputKind, LogMapping, MappingError, Stamps, gear_ratio
-from agvdyn.platform import Geometry, read_platform
+from agvdyn.io.mapping import InputKind, LogMapping, MappingError, Stamps, gear_ratio
+from agvdyn.platform import Geometry
 from agvdyn.time_base import fit_stamps, round_period_ns
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -56,10 +53,22 @@ def is_bag(path: str | os.PathLike) -> bool:
     return (path.is_dir() and (path / "metadata.yaml").exists()) or path.suffix.lower() in BAG_SUFFIXES
 
 
-def _typestore():
-    from rosbags.typesys import Stores, get_typestore
+_JOINT_STATE_TYPES = {
+    "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec",
+    "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+    JOINT_STATE: "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort",
+}
 
-    return get_typestore(Stores.ROS2_HUMBLE)
+
+def _joint_state_typestore():
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+    store = get_typestore(Stores.EMPTY)
+    types = {}
+    for name, text in _JOINT_STATE_TYPES.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store
 
 
 @dataclass(frozen=True)
@@ -76,8 +85,24 @@ class _Messages:
 def _read_messages(path: Path, topic: str) -> _Messages:
     from rosbags.rosbag2 import Reader, ReaderError
 
-    typestore = _typestore()
+    from agvdyn.io._cdr import decode_joint_states
+
+    typestore = _joint_state_typestore()
+
+    def deserialize(raw: bytes):
+        return typestore.deserialize_cdr(raw, JOINT_STATE)
+
     stamps, received, names, position, effort = [], [], [], [], []
+    pending: list[bytes] = []
+
+    def decode() -> None:  # a batch at a time: the raw bytes of a long bag are never all held
+        batch = decode_joint_states(pending, deserialize)
+        stamps.append(batch.stamps)
+        names.extend(batch.names)
+        position.extend(batch.position)
+        effort.extend(batch.effort)
+        pending.clear()
+
     try:
         with Reader(path) as reader:
             conns = [c for c in reader.connections if c.topic == topic]
@@ -88,17 +113,21 @@ def _read_messages(path: Path, topic: str) -> _Messages:
             if wrong:
                 raise LogError(f"{path}: topic {topic!r} has message type {wrong[0]}: expected {JOINT_STATE}")
             for _conn, timestamp, raw in reader.messages(connections=conns):
-                msg = typestore.deserialize_cdr(raw, JOINT_STATE)
-                stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
                 received.append(timestamp)
-                names.append(tuple(msg.name))
-                position.append(msg.position)
-                effort.append(msg.effort)
+                pending.append(raw)
+                if len(pending) >= _DECODE_BATCH:
+                    decode()
+            if pending:
+                decode()
     except (ReaderError, FileNotFoundError) as exc:
         raise LogError(f"{path}: cannot be read as a ROS 2 bag (sqlite3 or MCAP): {exc}") from exc
-    if not stamps:
+    if not received:
         raise LogError(f"{path}: topic {topic!r} has no messages")
-    return _Messages(np.array(stamps, dtype=np.int64), np.array(received, dtype=np.int64), names, position, effort)
+    return _Messages(np.concatenate(stamps), np.array(received, dtype=np.int64), names, position, effort)
+
+
+#: Messages decoded together (:mod:`agvdyn.io._cdr`): about 30 MB of raw JointState bytes.
+_DECODE_BATCH = 1 << 16
 
 
 class _JointTable:
@@ -227,9 +256,12 @@ def read_bag(
     # Each joint's interval from its own stamps (all its mapped fields), not from the message stream.
     joint_ns: dict[str, float] = {}
     counted: list[str] = []  # joints whose interval comes from counting their stamps
+    fits: dict[bytes, object] = {}  # joints published in the same messages share their stamps: fitted once
     for joint in mapping.sources:
         stamps = np.unique(np.concatenate([raw_series[s.quantity][0] for s in mapping.signals if s.source == joint]))
-        fit = fit_stamps(stamps, source=f"{path}: joint {joint!r}") if stamps.size > 1 else None
+        if stamps.size > 1 and stamps.tobytes() not in fits:
+            fits[stamps.tobytes()] = fit_stamps(stamps, source=f"{path}: joint {joint!r}")
+        fit = fits[stamps.tobytes()] if stamps.size > 1 else None
         joint_ns[joint] = fit.interval if fit is not None else float("nan")
         if fit is not None and not fit.lattice and mapping.rate is None:
             counted.append(joint)
@@ -285,115 +317,3 @@ def read_bag(
     if any(clipped.values()):
         conversion["clipped_to_stops"] = dict(clipped)
     return Log(path, checked, {"conversion": conversion}, clipped)
-
-
-def write_bag(
-    log: Log,
-    path: str | os.PathLike,
-    mapping: LogMapping | str | os.PathLike,
-    storage: Storage = "sqlite3",
-    *,
-    platform: Geometry | str | os.PathLike | None = None,
-    start_ns: int = 1_700_000_000_000_000_000,
-    groups: Sequence[Sequence[str]] | None = None,
-    group_offsets_ns: Sequence[int] | None = None,
-) -> Path:
-    """Write a log as a ROS 2 bag of JointState messages named as in ``mapping``.
-
-    One message per sample on ``mapping.topic`` with header stamp and receive time
-    ``start_ns + round(t * 1e9)``; every joint of the mapping in each message, ``position``
-    and ``effort`` in the mapping's raw units (inverse of :meth:`Signal.to_si`), NaN where a joint
-    has no such interface (as ros2_control's joint_state_broadcaster does), ``velocity`` empty.
-    Mapped rear headings are written as the mirror coupling gives them (-alpha). The bag
-    directory is written beside ``path`` and renamed into place; an existing ``path`` is refused.
-
-    With ``groups`` the joints are split over several publishers, as separate controllers do:
-    per sample one message per group holding only that group's joints, stamped
-    ``start_ns + round(t * 1e9) + group_offsets_ns[g]`` (default offset 0; the values stay those
-    of time t, so an offset shifts that group in time), messages interleaved in stamp order.
-
-    Parameters
-    ----------
-    log : the log to write.
-    path : bag directory to create.
-    mapping : a :class:`LogMapping` with ``input: ros2_bag``, or the path of a mapping file.
-    storage : ``"sqlite3"`` or ``"mcap"``.
-    platform : Geometry or platform file whose ``i_G`` converts gear sides; None: the platform
-        recorded in the log's sidecar, else the mapping's ``i_G``; refused when signals need a
-        gear ratio and none of these gives it, or when platform and mapping disagree.
-    start_ns : absolute stamp of ``t = 0``.
-    groups : joint names per publisher; every joint of the mapping in exactly one group. None: one
-        message with all joints per sample.
-    group_offsets_ns : stamp offset of each group, ns (default all 0).
-    """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
-    from agvdyn.io.log import sidecar_platform
-    from agvdyn.io.mapping_file import read_mapping
-
-    path = Path(path)
-    if not isinstance(mapping, LogMapping):
-        mapping = read_mapping(mapping)
-    if isinstance(platform, Geometry):
-        geometry = platform
-    elif platform is not None:
-        geometry = read_platform(platform)
-    else:
-        geometry = sidecar_platform(log)
-    i_G, _ = gear_ratio(mapping, geometry)
-    if mapping.input is not InputKind.ROS2_BAG:
-        raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}: writing a bag needs input: ros2_bag")
-    plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
-    if storage not in plugins:
-        raise ValueError(f"storage={storage!r}: expected one of {list(plugins)}")
-    if path.exists():
-        raise LogError(f"{path} exists already: not overwriting a bag")
-    joints = list(mapping.sources)
-    if groups is None:
-        groups = [joints]
-    groups = [list(g) for g in groups]
-    flat = [j for g in groups for j in g]
-    if sorted(flat) != sorted(joints) or len(set(flat)) != len(flat):
-        raise ValueError(f"groups={groups!r}: expected every joint of the mapping {joints} in exactly one group")
-    offsets = [0] * len(groups) if group_offsets_ns is None else [int(o) for o in group_offsets_ns]
-    if len(offsets) != len(groups):
-        raise ValueError(f"group_offsets_ns: {len(offsets)} offsets for {len(groups)} groups")
-    values = {c: log.frame[c].to_numpy(dtype=np.float64) for c in log.frame.columns if c != "segment"}
-    for heading, alpha in HEADING_QUANTITIES.items():
-        values[heading] = -values[alpha]
-    n = log.n_samples
-    position = np.full((n, len(joints)), np.nan)
-    effort = np.full((n, len(joints)), np.nan)
-    for sig in mapping.signals:
-        target = effort if sig.field == "effort" else position
-        target[:, joints.index(sig.source)] = sig.from_si(values[sig.quantity], i_G)
-    stamps = start_ns + np.round(log.t * 1e9).astype(np.int64)
-
-    typestore = _typestore()
-    JointState = typestore.types[JOINT_STATE]
-    Header = typestore.types["std_msgs/msg/Header"]
-    Time = typestore.types["builtin_interfaces/msg/Time"]
-    empty = np.array([], dtype=np.float64)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_parent = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    tmp = tmp_parent / path.name
-    try:
-        with Writer(tmp, version=9, storage_plugin=plugins[storage]) as writer:
-            conn = writer.add_connection(mapping.topic, JOINT_STATE, typestore=typestore)
-            cols = [np.array([joints.index(j) for j in g], dtype=np.int64) for g in groups]
-            # (stamp, group, sample) in stamp order: publishers interleave in the bag.
-            g_all = np.repeat(np.arange(len(groups)), n)
-            k_all = np.tile(np.arange(n), len(groups))
-            ns_all = np.concatenate([stamps + off for off in offsets])
-            order = np.lexsort((g_all, ns_all))
-            for ns, g, k in zip(ns_all[order].tolist(), g_all[order].tolist(), k_all[order].tolist()):
-                # one message per sample and group: the bag format is per message
-                msg = JointState(
-                    header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=""),
-                    name=groups[g], position=position[k, cols[g]], velocity=empty, effort=effort[k, cols[g]],
-                )
-                writer.write(conn, ns, typestore.serialize_cdr(msg, JOINT_STATE))
-        os.replace(tmp, path)
-    finally:
-        shutil.rmtree(tmp_parent, ignore_errors=True)
-    return path

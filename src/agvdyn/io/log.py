@@ -139,6 +139,13 @@ class Log:
     @cached_property
     def segments(self) -> np.ndarray | None:
         """Segment name of each row (N,) as str, ``""`` for rows in no segment; None without the column."""
+        lazy = object.__getattribute__(self, "frame")
+        if type(lazy) is LazyFrame:  # read straight from Parquet: the codes, without making the DataFrame
+            if lazy.segment_codes is None:
+                return None
+            arr = np.array([*SEGMENTS, ""])[lazy.segment_codes]  # code -1 (missing) picks the trailing ""
+            arr.setflags(write=False)
+            return arr
         if SEGMENT_COLUMN not in self.frame.columns:
             return None
         cat = pd.Categorical(self.frame[SEGMENT_COLUMN])

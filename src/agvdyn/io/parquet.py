@@ -1,6 +1,9 @@
 """Reading Parquet logs in our schema with pyarrow, straight into numpy (:func:`agvdyn.io.log.read_log`):
 the footer is read once per file version, and the columns come from pyarrow's buffers, so that
-reading our logs imports no pandas."""
+reading our logs imports no pandas. Files other tools wrote with our column names take the same
+way: float32 or integer columns (widened to float64 exactly as pandas does), and a ``segment``
+column stored as plain strings (read as a dictionary: the labels are compared once per distinct
+name, not once per row) or as a categorical."""
 from __future__ import annotations
 
 import os
@@ -28,13 +31,19 @@ _FOOTERS: dict[tuple[str, int, int], Any] = {}
 _FOOTERS_LOCK = threading.Lock()
 
 
-def _parquet_file(path: str | os.PathLike) -> Any:
-    """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any."""
+def _parquet_file(path: str | os.PathLike, read_dictionary: bool = False) -> Any:
+    """``pyarrow.parquet.ParquetFile(path)`` with the footer already read for this file version, if any;
+    with ``read_dictionary`` a ``segment`` column, if there is one, is read as a dictionary array."""
     import pyarrow.parquet as pq
 
     key = _version(path)
     with _FOOTERS_LOCK:
         footer = _FOOTERS.get(key)
+    if read_dictionary:
+        if footer is None:
+            footer = _parquet_file(path).metadata
+        segment = SEGMENT_COLUMN in footer.schema.names  # a missing column in read_dictionary is an error
+        return pq.ParquetFile(path, metadata=footer, read_dictionary=[SEGMENT_COLUMN] if segment else None)
     file = pq.ParquetFile(path, metadata=footer)
     if footer is None:
         with _FOOTERS_LOCK:  # the few most recent files: a log is asked for twice in a row
@@ -66,14 +75,15 @@ def write_our_parquet(path: str | os.PathLike, frame: Any) -> None:
 
 
 def our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[str | None], np.ndarray] | None] | None:
-    """The columns of a Parquet file that holds exactly our schema (float64 columns without nulls,
-    optional dictionary-encoded ``segment``) as numpy arrays and the segment's (names, codes);
-    None for any other file (read then through pandas, with its messages)."""
+    """The columns of a Parquet file that holds exactly our columns (floating or integer numbers
+    without nulls, an optional ``segment`` column of strings, plain or dictionary-encoded) as numpy
+    arrays (float64 or narrower, widened by the caller) and the segment's (names, codes); None for
+    any other file (read then through pandas, with its messages: booleans, nulls, extra columns)."""
     import pyarrow as pa
 
     try:
         # no pyarrow threads: logs are read in the identification's own threads (nested pools oversubscribed the cores)
-        table = _parquet_file(path).read(use_pandas_metadata=False, use_threads=False)
+        table = _parquet_file(path, read_dictionary=True).read(use_pandas_metadata=False, use_threads=False)
     except Exception as exc:  # noqa: BLE001 - any pyarrow failure: the file is not readable Parquet
         raise LogError(f"{path}: cannot be read as parquet: {exc}") from exc
     names = table.column_names
@@ -82,13 +92,15 @@ def our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[s
     columns = {}
     for name in LOG_COLUMNS:
         column = table.column(name)
-        if column.type != pa.float64() or column.null_count:
+        kind = _NUMPY_TYPES.get(str(column.type))
+        if kind is None or column.null_count:
             return None
-        columns[name] = _numbers(column.chunks, np.float64)
+        columns[name] = _numbers(column.chunks, kind)
     if SEGMENT_COLUMN not in names:
         return columns, None
     segment = table.column(SEGMENT_COLUMN)
-    if not pa.types.is_dictionary(segment.type) or not pa.types.is_string(segment.type.value_type):
+    if not pa.types.is_dictionary(segment.type) or not (
+            pa.types.is_string(segment.type.value_type) or pa.types.is_large_string(segment.type.value_type)):
         return None
     if not pa.types.is_integer(segment.type.index_type):
         return None
@@ -100,6 +112,12 @@ def our_parquet_columns(path: Path) -> tuple[dict[str, np.ndarray], tuple[list[s
     if indices.null_count:  # missing labels: -1
         codes[~_valid(indices)] = -1
     return columns, (segment.dictionary.to_pylist(), codes)
+
+
+#: Arrow types of number columns read straight into numpy (as pandas reads them: the same values
+#: after widening to float64); any other type (booleans, float16, decimals, times) goes through pandas.
+_NUMPY_TYPES = {"double": np.float64, "float": np.float32, **{
+    f"{sign}int{bits}": np.dtype(f"{sign}int{bits}") for sign in ("", "u") for bits in (8, 16, 32, 64)}}
 
 
 def _numbers(chunks: list[Any], dtype: np.dtype) -> np.ndarray:
