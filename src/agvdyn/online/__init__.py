@@ -13,7 +13,6 @@ Entry point :func:`track` replays logs through it and returns a :class:`TrackRes
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -96,12 +95,14 @@ def _log_rows(log: Any, geometry: Geometry, params: Parameters, settings: Tracke
 
 
 def track(logs: Sequence[Any], geometry: Geometry, params: Parameters, *, std: dict[str, float] | None = None,
-          settings: TrackerSettings = TrackerSettings()) -> TrackResult:
+          settings: TrackerSettings = TrackerSettings(), run=run_tracker) -> TrackResult:
     """Replay loaded logs (:func:`agvdyn.io.load_log`) in order through the payload tracker.
 
     ``params``: the identified parameters (every one but m_ch and C_ch held); ``std``: their stds
     (the initial uncertainty of m_ch and C_ch, at least ``settings.initial_std`` of the values). The
     state carries over from one log to the next (the same vehicle, one shift); the CUSUMs restart.
+    ``run``: the update over one log's rows (:func:`agvdyn.online.tracker.run_tracker`, or the C++
+    twin's :func:`agvdyn.online.cpp.run_tracker`).
     """
     if not logs:
         raise ValueError("track: no logs given")
@@ -112,7 +113,7 @@ def track(logs: Sequence[Any], geometry: Geometry, params: Parameters, *, std: d
         source = str(getattr(log, "path", None) or f"<log {n}>")
         rows = _log_rows(log, geometry, params, settings)
         state.g[:] = 0.0
-        theta, var, nis, flag, found = run_tracker(rows, state, settings, nominal, source)
+        theta, var, nis, flag, found = run(rows, state, settings, nominal, source)
         parts.append((rows.t, np.full(rows.n, n), theta, var, nis, flag))
         events += found
         sources.append(source)

@@ -33,23 +33,7 @@ def track(logs: Sequence[Any], geometry: Geometry, params: Parameters, *, std: d
           settings: TrackerSettings = TrackerSettings()):
     """:func:`agvdyn.online.track` with the C++ update: the same replay (state carried from log to log,
     CUSUMs restarted) and the same :class:`~agvdyn.online.TrackResult`."""
-    from agvdyn.online import TrackResult, _log_rows
+    from agvdyn.online import track as replay
 
-    if not logs:
-        raise ValueError("track: no logs given")
     ffcpp.extension()  # CppEngineUnavailable before any work
-    nominal = np.array([getattr(params, name) for name in TRACKED])
-    state = TrackerState.initial(params, std or {}, settings)
-    parts, events, sources = [], [], []
-    for n, log in enumerate(logs):
-        source = str(getattr(log, "path", None) or f"<log {n}>")
-        rows = _log_rows(log, geometry, params, settings)
-        state.g[:] = 0.0
-        theta, var, nis, flag, found = run_tracker(rows, state, settings, nominal, source)
-        parts.append((rows.t, np.full(rows.n, n), theta, var, nis, flag))
-        events += found
-        sources.append(source)
-    cat = [np.concatenate([p[i] for p in parts]) for i in range(6)]
-    return TrackResult(cat[0], cat[1], tuple(sources), cat[2][:, :2], np.sqrt(cat[3][:, :2]), cat[4], cat[5],
-                       tuple(events), settings, state.theta[2:].copy(), np.sqrt(state.R), rows.group_delay,
-                       rows.lookahead * rows.dt)
+    return replay(logs, geometry, params, std=std, settings=settings, run=run_tracker)
