@@ -176,7 +176,7 @@ void check_size(const char* name, std::size_t size, std::size_t expected) {
   }
 }
 
-void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
+void check_state_sizes(Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
   check_size("theta", theta.size(), 8);
   check_size("P", P.size(), 64);
   check_size("R", R.size(), 3);
@@ -185,6 +185,10 @@ void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_
   check_size("Iw", Iw.size(), 256);
   check_size("bw", bw.size(), 32);
   check_size("start", start.size(), 4);
+}
+
+void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
+  check_state_sizes(theta, P, R, n_rows, g, Iw, bw, start);
   ff::PayloadTracker::State st = tracker.state();
   for (int p = 0; p < 8; ++p) {
     st.theta[p] = theta.data()[p];
@@ -206,14 +210,7 @@ void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_
 
 void store_state(const ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw,
                  Flat start) {
-  check_size("theta", theta.size(), 8);
-  check_size("P", P.size(), 64);
-  check_size("R", R.size(), 3);
-  check_size("n_rows", n_rows.size(), 9);
-  check_size("g", g.size(), 4);
-  check_size("Iw", Iw.size(), 256);
-  check_size("bw", bw.size(), 32);
-  check_size("start", start.size(), 4);
+  check_state_sizes(theta, P, R, n_rows, g, Iw, bw, start);
   const ff::PayloadTracker::State& st = tracker.state();
   for (int p = 0; p < 8; ++p) {
     theta.data()[p] = st.theta[p];
