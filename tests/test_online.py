@@ -8,7 +8,6 @@ assert with about 1.5x those figures."""
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest

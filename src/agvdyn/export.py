@@ -58,7 +58,7 @@ def urdf(geom: Geometry, bodies: VehicleBodies, *, name: str | None = None) -> s
              '  <link name="base_link">',
              *_inertial(bodies.chassis_mass, (0.0, 0.0, bodies.chassis_com_height), bodies.chassis_inertia, "    "),
              '    <visual>',
-             f'      <origin xyz="0 0 0.1" rpy="0 0 0"/>',
+             '      <origin xyz="0 0 0.1" rpy="0 0 0"/>',
              f'      <geometry><box size="{_f(geom.l)} {_f(geom.b - 2 * width)} 0.04"/></geometry>',
              '    </visual>',
              '  </link>']

@@ -39,17 +39,19 @@ def track(
                      {"--out": "table"})
     from agvdyn._files import write_atomically
     from agvdyn.cli.sim_commands import _parameter_file
-    from agvdyn.identification import load_logs
-    from agvdyn.online import TrackerSettings, track as run
+    from agvdyn.io import load_logs
+    from agvdyn.online import TrackerSettings
 
     if engine == "cpp":
         from agvdyn import ffcpp
+        from agvdyn.online.cpp import track as run
 
         try:
-            ffcpp.extension()
+            ffcpp.extension()  # before the logs are read
         except ffcpp.CppEngineUnavailable as exc:
             raise fail(str(exc)) from exc
-        from agvdyn.online.cpp import track as run
+    else:
+        from agvdyn.online import track as run
     from agvdyn.platform import platform_of_parameters
 
     content = _parameter_file(params)
