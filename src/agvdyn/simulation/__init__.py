@@ -111,10 +111,12 @@ def simulate(
         raise ValueError("mjcf, split and engine_options belong to engine='mujoco'")
     traj = _trajectory(experiment, platform, Ts)
     ctrl_params = plant_params if controller_params is None else controller_params
-    if traj.lifted and vehicle is not None:
-        raise ValueError(f"experiment {traj.name!r}: the lifted-wheel experiment runs on engine='ours' only")
     if traj.lifted and settings.payload:
         raise ValueError(f"experiment {traj.name!r}: payload events need the vehicle on the ground")
+    if traj.lifted and vehicle is not None:  # sec. 7 on MuJoCo: the chassis welded above the floor
+        from agvdyn.simulation.mujoco_lifted import simulate_lifted_mujoco
+
+        return simulate_lifted_mujoco(traj, vehicle, ctrl_params, settings, seed, progress)
     if traj.lifted:  # the single-axis experiment of sec. 7 (lifted.py)
         from agvdyn.simulation.lifted import simulate_lifted
 
