@@ -96,6 +96,16 @@ def simulate(
                                                 "T s at (X, Y) m in the chassis frame with yaw inertia C kg m^2 "
                                                 "about its centre (negative mass: drop); repeatable; our plant "
                                                 "only; sidecar: payload_truth."),
+    breakaway: Optional[list[str]] = typer.Option(None, "--breakaway", help="GROUP=RATIO[:W_S] breakaway "
+                                                  "friction of joint group l (left steering), r (right "
+                                                  "steering), w (wheels) or all: static level RATIO times "
+                                                  "the sliding d_c, Stribeck velocity W_S rad/s (default: "
+                                                  "the settings' stribeck_velocity); repeatable, later ones "
+                                                  "win; our plant with stiction only; sidecar: true_model."),
+    torque_delay: Optional[float] = typer.Option(None, "--torque-delay", help="Seconds the logged torque "
+                                                 "columns lag the angles (>= 0; sub-sample delays "
+                                                 "interpolated); the motion is unchanged; sidecar: "
+                                                 "true_model.delay_s."),
     duration: Optional[float] = typer.Option(None, "--duration", help="driving only: length of the shift, s "
                                              "(default 300)."),
     floor: Optional[str] = typer.Option(None, "--floor", help="driving only: floor LENGTHxWIDTH in m (default "
@@ -133,6 +143,7 @@ def simulate(
             sim_settings = replace(sim_settings, payload=tuple(parse_payload(p) for p in payload))
         except ValueError as exc:
             raise fail(str(exc)) from exc
+    sim_settings = _effects(sim_settings, breakaway or [], torque_delay, on_mujoco)
     experiment = _driving(experiment, duration, floor, seed, platform_option(platform))
     geom = platform_option(platform)
     true_params = _params(params)
@@ -170,6 +181,34 @@ def simulate(
                           "(sidecar: slip_truth)")
     typer.echo(f"wrote {path} ({result.trajectory.n_samples:,} samples) and {path}.yaml"
                + (f" and {model_out}" if on_mujoco else ""))
+
+
+def _effects(settings, breakaway: list[str], torque_delay: Optional[float], on_mujoco: bool):
+    """The settings with the --breakaway groups and the --torque-delay (issue 30); bad values are
+    named errors."""
+    from dataclasses import replace
+
+    from agvdyn.simulation.plant import parse_breakaway
+
+    plant = settings.plant
+    if breakaway and on_mujoco:
+        raise fail(f"--breakaway {breakaway[0]!r}: runs on our plant only (--engine ours); MuJoCo's joint "
+                   "friction is the engine's")
+    if breakaway and plant.coulomb != "stiction":
+        raise fail(f"--breakaway {breakaway[0]!r}: needs the plant's stiction friction, not coulomb="
+                   f"{plant.coulomb!r} (--ideal-plant or the settings file)")
+    try:
+        for text in breakaway:
+            plant = plant.with_breakaway(*parse_breakaway(text))
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    sensors = settings.sensors
+    if torque_delay is not None:
+        try:
+            sensors = replace(sensors, torque_delay=torque_delay)
+        except ValueError:
+            raise fail(f"--torque-delay {torque_delay!r}: expected a finite number of seconds >= 0") from None
+    return replace(settings, plant=plant, sensors=sensors) if breakaway or torque_delay is not None else settings
 
 
 def _driving(experiment: str, duration: Optional[float], floor: Optional[str], seed: int, geom):

@@ -8,7 +8,7 @@ from numba import njit
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.simulation import _kernels, _plant_kernels
 from agvdyn.simulation._kernels import read_sensors
-from agvdyn.simulation._plant_kernels import _BW, _DCW, _DVW, _IG, _TLIM, _friction_terms
+from agvdyn.simulation._plant_kernels import _BW, _DCW, _DVW, _GROUP_W, _IG, _TLIM, _friction_terms
 
 drop_stale_cache(__file__, _kernels.__file__, _plant_kernels.__file__)
 
@@ -75,7 +75,7 @@ def run_lifted_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res, u_ff, bet
         for i in range(4):
             for j in range(substeps):
                 v = vel[5 + i]
-                d, f0 = _friction_terms(c, v, c[_DVW], c[_DCW], bw, dt)
+                d, f0 = _friction_terms(c, v, c[_DVW], c[_DCW], _GROUP_W, bw, dt)
                 v_new = (bw * v + dt * (c[_IG] * ua[i] - f0)) / (bw + dt * d)
                 work[0] += dt * c[_IG] * ua[i] * v_new
                 work[1] += dt * (d * v_new + f0) * v_new

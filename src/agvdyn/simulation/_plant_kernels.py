@@ -18,8 +18,13 @@ from numba import njit
 
 # Indices of the constant vector handed to the compiled code.
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
- _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _RATIO, _VSTRIB, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(33)
+ _CLONG, _CLAT, _MU, _FZ, _V0, _COUL, _VSTICK, _EPS, _TLIM, _KSTOP, _DSTOP, _RW, _NCONST) = range(31)
 _NCONST += 3  # _RW .. _RW + 3: true rolling radius of each wheel
+#: Breakaway friction per joint group (model_spec.FRICTION_GROUPS order: left steering, right
+#: steering, wheels): ``_RATIO + g`` the ratio d_s / d_c, ``_VSTRIB + g`` the Stribeck velocity w_s.
+_RATIO, _VSTRIB = _NCONST, _NCONST + 3
+_NCONST += 6
+_GROUP_L, _GROUP_R, _GROUP_W = 0, 1, 2
 #: Payload carried by the chassis (simulation/payload.py): mass m_p, first moments m_p x_p and m_p y_p
 #: about the reference point, yaw inertia J_p about the reference point (zero without a payload).
 _PM, _PSX, _PSY, _PJ = range(_NCONST, _NCONST + 4)
@@ -215,8 +220,10 @@ def _iteration_matrix(M, A, d, dt, K):
 
 
 @_jit_borrow
-def _coulomb(c, v, d_c):
-    """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0)."""
+def _coulomb(c, v, d_c, group):
+    """Coulomb friction force magnitude-signed F(v), its secant F/v and its slope dF/dv (>= 0) of a
+    joint of ``group`` (0: left steering, 1: right steering, 2: wheels; its breakaway ratio and
+    Stribeck velocity at ``_RATIO + group``, ``_VSTRIB + group``)."""
     mode = c[_COUL]
     av = abs(v)
     if mode == 2.0:
@@ -228,25 +235,28 @@ def _coulomb(c, v, d_c):
         sec = d_c / eps if abs(x) < 1e-8 else f / v
         return f, sec, d_c / eps / math.cosh(min(abs(x), 300.0)) ** 2
     vs = c[_VSTICK]
-    if c[_RATIO] == 1.0:  # no breakaway peak: the level is d_c (skips the exponential)
+    ratio = c[_RATIO + group]
+    if ratio == 1.0:  # no breakaway peak: the level is d_c (skips the exponential)
         return (d_c * v / vs, d_c / vs, d_c / vs) if av <= vs else (d_c * (1.0 if v > 0 else -1.0), d_c / av, 0.0)
-    e = math.exp(-(av / c[_VSTRIB]) ** 2)
-    level = d_c * (1.0 + (c[_RATIO] - 1.0) * e)
+    w_s = c[_VSTRIB + group]
+    e = math.exp(-(av / w_s) ** 2)
+    level = d_c * (1.0 + (ratio - 1.0) * e)
     if av <= vs:
         return level * v / vs, level / vs, level / vs
-    dlevel = d_c * (c[_RATIO] - 1.0) * e * (-2.0 * av / c[_VSTRIB] ** 2)
+    dlevel = d_c * (ratio - 1.0) * e * (-2.0 * av / w_s ** 2)
     return level * (1.0 if v > 0 else -1.0), level / av, max(dlevel, 0.0)
 
 
 @_jit_borrow
-def _friction_terms(c, v, d_v, d_c, inertia, dt):
-    """Linearly-implicit friction of one joint: force = d * v_new + e.
+def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
+    """Linearly-implicit friction of one joint of joint group ``group`` (:func:`_coulomb`):
+    force = d * v_new + e.
 
     Fast joints use the tangent (Rosenbrock-Euler) linearisation, exact for a constant Coulomb
     force; slow joints, which one step of friction could stop (|v| < 2 dt d_c / inertia), use the
     secant, which never flips the sign of v and holds a stuck joint.
     """
-    f, sec, slope = _coulomb(c, v, d_c)
+    f, sec, slope = _coulomb(c, v, d_c, group)
     v_thr = max(2.0 * dt * d_c / inertia, 3.0 * c[_VSTICK])
     if abs(v) < v_thr:
         return d_v + sec, 0.0
@@ -353,10 +363,10 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         dvec[4 + i] = d_long * g
     # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
     _iteration_matrix(M, A, dvec, dt, K)
-    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], M[3, 3], dt)
-    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], M[4, 4], dt)
+    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
+    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
     for i in range(4):
-        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], M[5 + i, 5 + i], dt)
+        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
     for q in range(3, 9):
         K[q, q] += dt * jf[0, q]
     # right-hand side M v - dt h + dt B u (+ stops); M is zero outside 0-4 but on the diagonal

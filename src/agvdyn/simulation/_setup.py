@@ -1,5 +1,6 @@
 """What every closed-loop run starts from, and its chunked stepping (shared by the ground and the
-lifted-wheel simulations)."""
+lifted-wheel simulations, on either engine); after the last chunk the torque sensors' delay
+(``SensorSettings.torque_delay``) is applied to the logged torques."""
 from __future__ import annotations
 
 import math
@@ -11,7 +12,7 @@ import numpy as np
 
 from agvdyn.platform import Geometry, Parameters
 from agvdyn.simulation.plant import plant_constants
-from agvdyn.simulation.sensors import draw_noise
+from agvdyn.simulation.sensors import delayed_torques, draw_noise
 from agvdyn.trajectories import Trajectory, check_limits
 
 #: Samples simulated between two progress reports.
@@ -22,7 +23,7 @@ CHUNK = 5000
 class RunState:
     """The plan (joint motion, feed-forward of eq. 21, wheel angles), sensor noise, compiled plant
     constants and controller gains, encoder resolutions, the mutable plant and controller state,
-    and the output buffers of one run."""
+    the output buffers of one run and the lag of the logged torques in sample periods."""
 
     q_dot_d: np.ndarray
     u_ff: np.ndarray
@@ -38,6 +39,7 @@ class RunState:
     work: np.ndarray
     out: dict[str, np.ndarray]
     energy: np.ndarray
+    torque_delay_samples: float = 0.0
 
 
 def desired_motion(traj: Trajectory, st: RunState) -> tuple[np.ndarray, ...]:
@@ -69,12 +71,15 @@ def prepare_run(traj: Trajectory, platform: Geometry, plant_params: Parameters, 
         draw_noise(n, settings.sensors, np.random.default_rng(seed)),
         plant_constants(platform, plant_params, settings.plant), settings.controller.gains(platform),
         2 * math.pi / (settings.sensors.encoder_counts * platform.i_G), 2 * math.pi / settings.sensors.steering_counts,
-        pos, np.zeros(9), np.zeros(state_size), np.zeros(3), out, np.zeros(n))
+        pos, np.zeros(9), np.zeros(state_size), np.zeros(3), out, np.zeros(n),
+        settings.sensors.torque_delay / settings.sample_time)
 
 
 def run_chunks(name: str, n: int, sample_time: float, state: RunState, step: Callable[[int, int], None],
                progress: Callable[[int, int], None] | None) -> None:
-    """Call ``step(k0, k1)`` over the samples in chunks, checking for divergence and reporting progress."""
+    """Call ``step(k0, k1)`` over the samples in chunks, checking for divergence and reporting progress;
+    then delay the measured torques ``state.out["meas"]`` by ``state.torque_delay_samples`` (in place;
+    nothing is done without a delay)."""
     for k0 in range(0, n, CHUNK):
         k1 = min(n, k0 + CHUNK)
         step(k0, k1)
@@ -83,3 +88,5 @@ def run_chunks(name: str, n: int, sample_time: float, state: RunState, step: Cal
                                      "reduce the plant step (substeps) or the gains")
         if progress is not None:
             progress(k1, n)
+    if state.torque_delay_samples > 0:
+        state.out["meas"][:] = delayed_torques(state.out["meas"], state.torque_delay_samples)

@@ -13,6 +13,9 @@ plant (plant.py, "Payload") adds them to the chassis; the true parameters become
 
 and the yaw inertia about the loaded centre of mass is ``C_ch' - m_ch' (x_c^2 + y_c^2)``. The tyres'
 normal load becomes ``m_ch' g / 4`` (the load distribution of an off-centre payload is not modelled).
+A payload carried through the whole run (every event at t = 0) makes these the log's truth: the
+sidecar's ``true_parameters`` hold m_ch', C_ch' and x_c, y_c (``SimulationResult.true_model``, the
+``com_offset`` extension of :mod:`agvdyn.model_spec`).
 
 The velocities are continuous through an event (the load is handed over at the vehicle's velocity),
 so the kinetic energy jumps by ``1/2 v^T (M' - M) v``: :attr:`PayloadTruth.energy_jump`, and the

@@ -34,10 +34,14 @@ stiffness, and as the slip stiffness grows it becomes the M-orthogonal projectio
 ``T_s / substeps`` (default 0.5 ms) for accuracy of the explicit Coriolis terms.
 
 Coulomb friction with stiction: ``F = level v / v_stick`` for ``|v| <= v_stick = 1e-4 rad/s``,
-``level sign(v)`` beyond, ``level = d_c (1 + (ratio - 1) exp(-(v / v_stribeck)^2))``. Below the
-breakaway torque ``ratio d_c`` a joint sticks (creep below 1e-4 rad/s, a numerical
-regularisation 100 times narrower than the model's tanh with epsilon = 0.01 rad/s, which creeps
-at up to 0.01 rad/s under any torque); above it the joint slides with ``d_c sign(v)``.
+``level sign(v)`` beyond, ``level = d_c (1 + (ratio - 1) exp(-(v / v_stribeck)^2))``, i.e. the
+level ``d_c + (d_s - d_c) exp(-(v / w_s)^2)`` of :func:`agvdyn.model_spec.joint_friction` with
+``d_s = ratio d_c`` and ``w_s = v_stribeck``, per joint group (left steering, right steering,
+wheels: ``PlantSettings.breakaway_ratios`` / ``stribeck_velocities``, by default the global
+``breakaway_ratio`` / ``stribeck_velocity`` for all three). Below the breakaway torque ``ratio d_c``
+a joint sticks (creep below 1e-4 rad/s, a numerical regularisation 100 times narrower than the
+model's tanh with epsilon = 0.01 rad/s, which creeps at up to 0.01 rad/s under any torque); above
+it the joint slides with ``d_c sign(v)``.
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
 Payload (issue 31, payload.py): a load fixed to the chassis, mass ``m_p``, first moments
@@ -60,6 +64,7 @@ from typing import Literal
 
 import numpy as np
 
+from agvdyn.model_spec import FRICTION_GROUPS
 from agvdyn.platform import EPSILON, Geometry, Parameters
 
 GRAVITY = 9.81
@@ -72,6 +77,8 @@ from agvdyn.simulation._plant_kernels import (  # noqa: F401  (compiled plant, r
 )
 
 _COULOMB = {"stiction": 0.0, "tanh": 1.0, "none": 2.0}
+#: Joint groups of the breakaway friction, in the order of ``breakaway_ratios`` (model_spec.FRICTION_GROUPS).
+BREAKAWAY_GROUPS = tuple(FRICTION_GROUPS)
 
 
 @dataclass(frozen=True)
@@ -81,7 +88,10 @@ class PlantSettings:
     Tyres: ``slip_stiffness_long`` / ``slip_stiffness_lat`` (N per unit slip), friction coefficient
     ``mu``, standstill regularisation ``slip_velocity`` (m/s). Neglected effects, each switchable:
     ``coulomb`` friction model (``"stiction"`` true stick/slip, ``"tanh"`` the model's, ``"none"``),
-    ``breakaway_ratio`` (static / sliding friction, Stribeck velocity ``stribeck_velocity``),
+    ``breakaway_ratio`` (static / sliding friction, Stribeck velocity ``stribeck_velocity``) for all
+    joint groups, or per group ``breakaway_ratios`` / ``stribeck_velocities`` = (left steering, right
+    steering, wheels) (None: the global value for all three; giving both is an error, see
+    :meth:`group_breakaway`, :meth:`with_breakaway`),
     ``steering_masses`` (unit masses ``unit_mass`` at ``unit_offset`` from the steering axis; offset
     None = the offset a; mass None = 30 kg, or less where 30 kg at that offset would take more than
     half of C_l/2 or C_r/2 as the units' share of the steering inertia), ``torque_limit`` (motor peak torque in N m; None = unlimited),
@@ -99,6 +109,8 @@ class PlantSettings:
     stick_velocity: float = 1e-4
     breakaway_ratio: float = 1.0
     stribeck_velocity: float = 0.01
+    breakaway_ratios: tuple[float, float, float] | None = None
+    stribeck_velocities: tuple[float, float, float] | None = None
     steering_masses: bool = True
     unit_mass: float | None = None
     unit_offset: float | None = None
@@ -118,6 +130,7 @@ class PlantSettings:
                 raise ValueError(f"plant setting {key}={v!r}: expected a finite number > 0")
         if not self.breakaway_ratio >= 1:
             raise ValueError(f"breakaway_ratio={self.breakaway_ratio!r}: expected >= 1 (static >= sliding friction)")
+        self._check_groups()
         if self.unit_mass is not None and not self.unit_mass >= 0:
             raise ValueError(f"unit_mass={self.unit_mass!r}: expected >= 0 kg")
         if self.torque_limit is not None and not self.torque_limit > 0:
@@ -127,15 +140,94 @@ class PlantSettings:
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ValueError(f"substeps={self.substeps!r}: expected an integer >= 1")
 
+    def _check_groups(self) -> None:
+        """The per-group breakaway: 3 values each, ratios >= 1, Stribeck velocities > 0, and not
+        together with a global value other than its default."""
+        for key, one, expected in (("breakaway_ratios", "breakaway_ratio", ">= 1 (static >= sliding friction)"),
+                                   ("stribeck_velocities", "stribeck_velocity", "> 0 rad/s")):
+            values = getattr(self, key)
+            if values is None:
+                continue
+            if not isinstance(values, (tuple, list)) or len(values) != 3:
+                raise ValueError(f"plant setting {key}={values!r}: expected 3 numbers (left steering, right "
+                                 "steering, wheels)")
+            bad = [f"{g}={v!r}" for g, v in zip(BREAKAWAY_GROUPS, values)
+                   if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                   or not (v >= 1 if key == "breakaway_ratios" else v > 0)]
+            if bad:
+                raise ValueError(f"plant setting {key}: {', '.join(bad)}: expected a finite number {expected}")
+            if getattr(self, one) != PlantSettings.__dataclass_fields__[one].default:
+                raise ValueError(f"plant settings {one}={getattr(self, one)!r} and {key}={values!r}: expected one "
+                                 f"of them ({one} for all joint groups, {key} per group)")
+            object.__setattr__(self, key, tuple(float(v) for v in values))
+
+    def group_breakaway(self) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
+        """``((ratio, w_s), ...)`` of the joint groups left steering, right steering, wheels:
+        breakaway ratio d_s / d_c and Stribeck velocity w_s (rad/s) of the friction law."""
+        ratios = self.breakaway_ratios or (self.breakaway_ratio,) * 3
+        speeds = self.stribeck_velocities or (self.stribeck_velocity,) * 3
+        return tuple(zip(ratios, speeds))  # type: ignore[return-value]
+
+    def with_breakaway(self, group: str, ratio: float, stribeck_velocity: float | None = None) -> "PlantSettings":
+        """These settings with breakaway ``ratio`` (and Stribeck velocity, None: unchanged) in joint
+        ``group`` ``"l"``, ``"r"``, ``"w"`` or ``"all"``, in the per-group form."""
+        from dataclasses import replace
+
+        if group not in (*BREAKAWAY_GROUPS, "all"):
+            raise ValueError(f"breakaway group {group!r}: expected one of {[*BREAKAWAY_GROUPS, 'all']}")
+        pairs = [list(p) for p in self.group_breakaway()]
+        for g, pair in zip(BREAKAWAY_GROUPS, pairs):
+            if group in (g, "all"):
+                pair[0] = ratio
+                pair[1] = pair[1] if stribeck_velocity is None else stribeck_velocity
+        defaults = PlantSettings.__dataclass_fields__
+        return replace(self, breakaway_ratio=defaults["breakaway_ratio"].default,
+                       stribeck_velocity=defaults["stribeck_velocity"].default,
+                       breakaway_ratios=tuple(p[0] for p in pairs), stribeck_velocities=tuple(p[1] for p in pairs))
+
     def ideal(self) -> "PlantSettings":
         """The same tyres with every neglected effect off (the identification model's structure)."""
         from dataclasses import replace
         return replace(self, coulomb="tanh", steering_masses=False, torque_limit=None, wheel_radius_error=(0.0,) * 4)
 
     def to_dict(self) -> dict:
+        """The settings as plain data; the per-group breakaway only when set (older files unchanged)."""
         out = dict(self.__dict__)
         out["wheel_radius_error"] = list(self.wheel_radius_error)
+        for key in ("breakaway_ratios", "stribeck_velocities"):
+            if out[key] is None:
+                del out[key]
+            else:
+                out[key] = list(out[key])
         return out
+
+
+def parse_breakaway(text: str) -> tuple[str, float, float | None]:
+    """``GROUP=RATIO[:W_S]`` -> ``(group, ratio, w_s)`` (``"w=1.3:0.05"``; W_S None when not given):
+    breakaway ratio d_s / d_c >= 1 and Stribeck velocity w_s > 0 rad/s of joint group ``l`` (left
+    steering), ``r`` (right steering), ``w`` (wheels) or ``all``; a bad string is a ValueError naming
+    it and the expected form (``--breakaway``, :meth:`PlantSettings.with_breakaway`)."""
+    form = ("expected GROUP=RATIO[:W_S] with GROUP one of l, r, w, all (left steering, right steering, wheels), "
+            "RATIO = static / sliding friction >= 1 and W_S the Stribeck velocity > 0 rad/s, e.g. all=1.3:0.05")
+    group, sep, values = text.strip().partition("=")
+    group = group.strip().lower()
+    if not sep:
+        raise ValueError(f"--breakaway {text!r}: no '=': {form}")
+    if group not in (*BREAKAWAY_GROUPS, "all"):
+        raise ValueError(f"--breakaway {text!r}: unknown joint group {group!r}: {form}")
+    parts = values.split(":")
+    try:
+        if not 1 <= len(parts) <= 2:
+            raise ValueError("wrong number of fields")
+        ratio = float(parts[0])
+        w_s = float(parts[1]) if len(parts) == 2 else None
+    except ValueError as exc:
+        raise ValueError(f"--breakaway {text!r}: {exc}: {form}") from None
+    if not (math.isfinite(ratio) and ratio >= 1):
+        raise ValueError(f"--breakaway {text!r}: ratio {ratio!r}: expected >= 1 (static >= sliding friction)")
+    if w_s is not None and not (math.isfinite(w_s) and w_s > 0):
+        raise ValueError(f"--breakaway {text!r}: Stribeck velocity {w_s!r}: expected > 0 rad/s")
+    return group, ratio, w_s
 
 
 def default_unit_mass(params: Parameters, offset: float, mass: float = 30.0) -> float:
@@ -167,8 +259,9 @@ def plant_constants(geom: Geometry, params: Parameters, settings: PlantSettings)
     c[_FZ] = params.m_ch * GRAVITY / 4
     c[_V0] = settings.slip_velocity
     c[_COUL] = _COULOMB[settings.coulomb]
-    c[_VSTICK], c[_RATIO], c[_VSTRIB], c[_EPS] = (settings.stick_velocity, settings.breakaway_ratio,
-                                                    settings.stribeck_velocity, EPSILON)
+    c[_VSTICK], c[_EPS] = settings.stick_velocity, EPSILON
+    for g, (ratio, w_s) in enumerate(settings.group_breakaway()):
+        c[_RATIO + g], c[_VSTRIB + g] = ratio, w_s
     c[_TLIM] = np.inf if settings.torque_limit is None else settings.torque_limit
     c[_KSTOP], c[_DSTOP] = settings.stop_stiffness, settings.stop_damping
     c[_RW:_RW + 4] = geom.r * (1.0 + np.asarray(settings.wheel_radius_error, dtype=float))
@@ -188,5 +281,5 @@ def set_payload(c: np.ndarray, moments: np.ndarray, m_ch: float) -> None:
     c[_FZ] = (m_ch + float(moments[0])) * GRAVITY / 4
 
 
-__all__ = ["GRAVITY", "PlantSettings", "plant_constants", "plant_step", "kinetic_energy", "run_open_loop",
-           "set_payload"]
+__all__ = ["GRAVITY", "BREAKAWAY_GROUPS", "PlantSettings", "parse_breakaway", "plant_constants", "plant_step",
+           "kinetic_energy", "run_open_loop", "set_payload"]

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agvdyn.model_spec import FRICTION_GROUPS, ModelParameters, ModelSpec
 from agvdyn.odometry import odometry
 from agvdyn.platform import WHEELS, Geometry, Parameters
 from agvdyn.simulation._kernels import contact_points, slip_speeds
@@ -36,6 +37,7 @@ class SimulationResult:
     Energy: ``energy`` (N,) kinetic energy, ``work`` (N, 3) cumulative (motor, dissipated, stops) work.
     True slip: ``slip_speed`` (N, 4), ``contact_points`` (N, 4, 2), :meth:`slip_intervals`.
     Payload: ``payload_truth`` the loads picked up and dropped (:mod:`agvdyn.simulation.payload`).
+    Model truth beyond the paper (issue 30): :attr:`true_model`.
     """
 
     trajectory: Trajectory
@@ -172,21 +174,75 @@ class SimulationResult:
             })
         return pd.DataFrame(rows)
 
+    @property
+    def whole_run_payload(self) -> Any:
+        """The :class:`~agvdyn.simulation.payload.PayloadTruth` of a payload carried through the whole run
+        (every event at sample 0), else None (no payload, or one that changes during the run)."""
+        truths = self.payload_truth
+        return truths[-1] if truths and all(p.sample == 0 for p in truths) else None
+
+    @cached_property
+    def true_model(self) -> ModelParameters:
+        """The true model of the log (:class:`agvdyn.model_spec.ModelParameters`): the 11 parameters of
+        the vehicle the log shows and the effects beyond the paper that are on.
+
+        * breakaway friction (our plant with stiction, some group's ratio != 1): ``friction="stribeck"``,
+          ``d_sl, d_sr, d_sw`` = ratio * d_c of the group, ``w_sl, w_sr, w_sw`` its Stribeck velocity;
+        * a torque delay (``SensorSettings.torque_delay``): ``delay_s``;
+        * a payload carried through the whole run (:attr:`whole_run_payload`): ``m_ch``, ``C_ch`` (about
+          the reference point) of the loaded chassis and its centre of mass ``x_c, y_c``
+          (``com_offset`` when off the reference point). With payload changes during the run the
+          parameters are those without a payload (``plant_params``; the loads' truth: ``payload_truth``).
+        """
+        params, extra = self.plant_params, {}
+        groups = self.settings.plant.group_breakaway()
+        stribeck = (self.engine == "ours" and self.settings.plant.coulomb == "stiction"
+                    and any(ratio != 1.0 for ratio, _ in groups))
+        if stribeck:
+            for (ratio, _), (name, (_, d_c)) in zip(groups, FRICTION_GROUPS.items()):
+                extra[f"d_s{name}"] = ratio * getattr(params, d_c)
+            extra.update((f"w_s{name}", w_s) for (_, w_s), name in zip(groups, FRICTION_GROUPS))
+        load = self.whole_run_payload
+        if load is not None:
+            params = params.replace(m_ch=load.m_ch, C_ch=load.C_ch)
+            extra.update(x_c=load.x_c, y_c=load.y_c)
+        delay = self.settings.sensors.torque_delay
+        spec = ModelSpec(friction="stribeck" if stribeck else "paper", delay=delay,
+                         com_offset=load is not None and (load.x_c != 0.0 or load.y_c != 0.0),
+                         stribeck_velocities=tuple(w for _, w in groups) if stribeck else None)
+        return ModelParameters(params, extra, delay, spec)
+
+    def _truth_entries(self) -> dict[str, Any]:
+        """``true_parameters`` (the 11 of eq. 18, then the extra ones of :attr:`true_model`) and, when
+        an effect beyond the paper or a whole-run payload is on, ``true_model`` {friction, delay_s,
+        com_offset, stribeck_velocities}; without them exactly the paper's parameters."""
+        truth = self.true_model
+        out: dict[str, Any] = {"true_parameters": {**truth.parameters.to_dict(), **truth.extra}}
+        if truth.spec.is_paper and self.whole_run_payload is None:
+            return out
+        model = {"friction": truth.spec.friction, "delay_s": truth.delay_s, "com_offset": truth.spec.com_offset}
+        if truth.spec.stribeck_velocities is not None:
+            model["stribeck_velocities"] = list(truth.spec.stribeck_velocities)
+        return {**out, "true_model": model}
+
     def sidecar(self) -> dict[str, Any]:
-        """YAML sidecar of the log: platform, true parameters (eq. 18 order), seed, settings, summary,
-        and the true slip intervals ``slip_truth`` (above ``slip_truth_threshold`` m/s)."""
+        """YAML sidecar of the log: platform, true parameters (eq. 18 order, then those of the effects
+        beyond the paper, :attr:`true_model`), seed, settings, summary, and the true slip intervals
+        ``slip_truth`` (above ``slip_truth_threshold`` m/s)."""
         fs = floor_space(self.trajectory)
+        truth = self._truth_entries()
         side = {
             "source": "agvdyn.simulation",
             "engine": self.engine,
             "experiment": self.experiment,
             "platform": self.geometry.to_dict(),
-            "true_parameters": self.plant_params.to_dict(),
+            "true_parameters": truth["true_parameters"],
             "controller_parameters": self.controller_params.to_dict(),
             "seed": int(self.seed),
             # the torque of row k is held over [t_k, t_k + T_s) (zero-order hold): seen from the
             # angle samples it leads by half a sample (IdentificationSettings.torque_lead)
             "torque_lead": 0.5,
+            **({"true_model": truth["true_model"]} if "true_model" in truth else {}),
             "settings": self.settings.to_dict(),
             "plant": _plant_facts(self.geometry, self.plant_params, self.settings.plant),
             "floor_space": {"length": fs.length, "width": fs.width},
