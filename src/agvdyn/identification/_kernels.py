@@ -336,10 +336,11 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
 
 
 @numba.njit(cache=True, nogil=True)
-def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_columns, column, out, key, step,
+def kept_rows(regressor, extra, torque, keep, sample, coord, slot_key, column, out, key, step,
               group, by_key, cursor, nonzero):  # pragma: no cover - compiled
-    """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 [+ 4] + 1): the
-    columns of ``[regressor | offsets]`` at the positions ``column`` (natural column -> stored
+    """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 + q + 1): the
+    columns of ``[regressor | extra]`` (``extra`` (n, dof, q): the columns after the paper's, motor-torque
+    offsets and model extensions; q may be 0) at the positions ``column`` (natural column -> stored
     one), the torque last; ``key``, ``step``, ``group`` per row. Rows of slot c get key
     ``slot_key[c]`` and group ``coord[c]``; slot by slot, each in time order. Each row is also
     written to ``by_key[cursor[key]]`` (and the cursor advanced): the rows grouped by key, and
@@ -353,9 +354,8 @@ def kept_rows(regressor, offsets, torque, keep, sample, coord, slot_key, offset_
                 continue
             for p in range(11):
                 out[k, column[p]] = regressor[j, c, p]
-            if offset_columns:
-                for p in range(4):
-                    out[k, column[11 + p]] = offsets[j, c, p]
+            for p in range(extra.shape[2]):
+                out[k, column[11 + p]] = extra[j, c, p]
             out[k, w - 1] = torque[j, c]
             key[k] = slot_key[c]
             step[k] = sample[j]

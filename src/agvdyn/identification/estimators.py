@@ -33,6 +33,7 @@ __all__ = ["Estimator", "LeastSquares", "WeightedLeastSquares", "Robust", "Bound
 PHYSICAL_BOUNDS: Mapping[str, tuple[float, float]] = {
     **dict.fromkeys(("C_l", "C_r", "m_ch", "C_ch", "B_w"), (1e-9, math.inf)),
     **dict.fromkeys(("d_vl", "d_cl", "d_vr", "d_cr", "d_vw", "d_cw"), (0.0, math.inf)),
+    **dict.fromkeys(("d_sl", "d_sr", "d_sw"), (0.0, math.inf)),  # breakaway levels (agvdyn.model_spec)
 }
 #: MAD to standard deviation of normal data.
 _MAD = 1.4826

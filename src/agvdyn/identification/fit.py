@@ -38,11 +38,21 @@ from agvdyn.identification.normal import (
     row_statistics,
     stacked_regression_data,
 )
+from agvdyn.identification.model_fit import (
+    breakaway_warnings,
+    extension_estimates,
+    hold_unobservable,
+    noisy_extensions,
+    residual_sums,
+    with_unobservable,
+)
+from agvdyn.identification.model_rows import resolved_model
 from agvdyn.identification.plausibility import ImplausibleError, implausible_parameters
 from agvdyn.identification.regression import Dependency, Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification, ParameterCorrelation, UncertaintySummary
 from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.uncertainty import parameter_uncertainty
+from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, EXTRA_NAMES, PAPER_MODEL, ModelSpec
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["fit_blocks", "fit_regression", "normal_equations", "check_fixed", "columns", "Estimate", "FitUncertainty", "estimate",
@@ -62,9 +72,11 @@ def check_fixed(fixed: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
-def columns(fixed: Mapping[str, float], with_offsets: bool) -> tuple[list[str], list[str], list[int], np.ndarray]:
-    """All column names, the free ones, their indices and the values of the fixed ones (eq. 24)."""
-    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else [])
+def columns(fixed: Mapping[str, float], with_offsets: bool, model: ModelSpec = PAPER_MODEL
+            ) -> tuple[list[str], list[str], list[int], np.ndarray]:
+    """All column names (the paper's parameters, the offsets ``with_offsets``, the ``model``'s columns
+    ``linear_names``), the free ones, their indices and the values of the fixed ones (eq. 24)."""
+    names = list(PARAMETER_NAMES) + (list(OFFSET_NAMES) if with_offsets else []) + list(model.linear_names)
     free = [n for n in names if n not in fixed]
     p_fixed = np.zeros(len(names))
     for name, value in fixed.items():
@@ -74,21 +86,34 @@ def columns(fixed: Mapping[str, float], with_offsets: bool) -> tuple[list[str], 
 
 def fit_blocks(blocks: Sequence[EquationBlock], geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
                settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
-               stacked: bool = False, **account: Any) -> Identification:
+               stacked: bool = False, model: ModelSpec = PAPER_MODEL, **account: Any) -> Identification:
     """Regression stage on equation blocks: by their normal equations (pseudo-rows, as
     :func:`identify`), or with ``stacked=True`` on all rows stacked in memory (the reference the
     tests compare with). ``account``: fields of the result's :class:`RowAccount` (sources, notes,
-    n_samples, counts, slip_events, slip_thresholds)."""
+    n_samples, counts, slip_events, slip_thresholds). ``model``: the resolved model whose columns the
+    blocks carry (``EquationBlock.model_regressor``)."""
     fixed = check_fixed(fixed)
     blocks = tuple(blocks)
-    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
+    model = _model_of(blocks, model)
+    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets, model)
     if stacked:
         data = stacked_regression_data(blocks, idx_free, p_fixed, offsets=settings.fit.torque_offsets)
     else:
         data = normal_equations(blocks, idx_free, p_fixed, offsets=settings.fit.torque_offsets)
     account.setdefault("n_samples", sum(b.t.size for b in blocks))
     return fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator,
-                          account=RowAccount(blocks=list(blocks), **account))
+                          account=RowAccount(blocks=list(blocks), **account), model=model)
+
+
+def _model_of(blocks: Sequence[EquationBlock], model: ModelSpec) -> ModelSpec:
+    """The resolved ``model``, checked against the columns the blocks carry."""
+    model = resolved_model(model)
+    want = len(model.linear_names)
+    have = {0 if b.model_regressor is None else b.model_regressor.shape[2] for b in blocks}
+    if have - {want}:
+        raise ValueError(f"equation blocks with {sorted(have)} model columns for model {model.label} "
+                         f"({want}: {list(model.linear_names)}): make the rows with the same model")
+    return model
 
 
 def normal_equations(blocks: Sequence[EquationBlock], free: Sequence[int], theta_fixed: np.ndarray, *,
@@ -102,19 +127,23 @@ def normal_equations(blocks: Sequence[EquationBlock], free: Sequence[int], theta
 
 def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[str, float] = DEFAULT_FIXED,
                    settings: IdentificationSettings = IdentificationSettings(), estimator: Estimator | None = None,
-                   account: RowAccount | None = None, workers: int = 1) -> Identification:
+                   account: RowAccount | None = None, workers: int = 1, model: ModelSpec = PAPER_MODEL
+                   ) -> Identification:
     """Regression stage: the stacked system of eq. (22) with the fixed parameters to the right
     (eq. 24), rank check naming what is not excited, scaled least squares (eq. 25), uncertainty
-    (``workers`` threads), physical plausibility; ``account``: the rows' account for the result."""
+    (``workers`` threads), physical plausibility; ``account``: the rows' account for the result;
+    ``model``: the resolved model whose columns ``data`` has after the paper's and the offsets."""
     fixed = check_fixed(fixed)
-    free = columns(fixed, settings.fit.torque_offsets)[1]
+    model = resolved_model(model)
+    free = columns(fixed, settings.fit.torque_offsets, model)[1]
     est = estimator if estimator is not None else settings.fit.make_estimator()
-    check = check_excitation(data, free, est, settings)
+    data, free, unseen = hold_unobservable(data, free, model)
+    check = with_unobservable(check_excitation(data, free, est, settings), unseen)
     fitted = estimate(check, est, settings)
     unc = fit_uncertainty(check, fitted, settings, workers)
-    warnings = check_plausibility(check, fitted, unc, settings)
+    warnings = check_plausibility(check, fitted, unc, settings, geometry)
     return assemble(check, fitted, unc, warnings, fixed=fixed, settings=settings, geometry=geometry,
-                    account=account if account is not None else RowAccount())
+                    account=account if account is not None else RowAccount(), model=model)
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,6 +192,7 @@ class FitUncertainty:
     cond_unscaled: float
     cond_with_offsets: float
     warnings: tuple[str, ...]
+    cov: np.ndarray | None = None  # of the free columns (the check's order)
 
 
 def fit_uncertainty(check: ExcitationCheck, fitted: Estimate, settings: IdentificationSettings,
@@ -172,7 +202,7 @@ def fit_uncertainty(check: ExcitationCheck, fitted: Estimate, settings: Identifi
     u = settings.uncertainty
     unc = parameter_uncertainty(u.method, est, check.data, bandwidth=u.bandwidth, bandwidth_factor=u.bandwidth_factor,
                                 min_bandwidth=u.min_bandwidth, replicates=u.bootstrap_replicates, seed=u.seed,
-                                names=free, reported=PARAMETER_NAMES, workers=workers)
+                                names=free, reported=(*PARAMETER_NAMES, *EXTRA_NAMES), workers=workers)
     sd_all, bad_variances = std_from_covariance(unc.cov, free)
     # cond(Theta_1,w^T Theta_1,w) of the paper's parameters alone (eq. 25); the nuisance offset
     # columns are reported separately
@@ -197,8 +227,8 @@ def fit_uncertainty(check: ExcitationCheck, fitted: Estimate, settings: Identifi
     return FitUncertainty(
         std, std_classic, ParameterCorrelation(tuple(correlation["names"]), tuple(map(tuple, correlation["matrix"]))),
         UncertaintySummary.of(unc.method.value, unc.details, dof),
-        {n: float(q) for n, q in zip(free, unc.quantile()) if n in PARAMETER_NAMES},
-        cond, cond_unscaled, cond_with_offsets, tuple(unc.warnings) + tuple(bad_variances))
+        {n: float(q) for n, q in zip(free, unc.quantile()) if n in PARAMETER_NAMES or n in EXTRA_NAMES},
+        cond, cond_unscaled, cond_with_offsets, tuple(unc.warnings) + tuple(bad_variances), unc.cov)
 
 
 def _parameter_std(unc: FitUncertainty) -> dict[str, float]:
@@ -206,39 +236,49 @@ def _parameter_std(unc: FitUncertainty) -> dict[str, float]:
 
 
 def check_plausibility(check: ExcitationCheck, fitted: Estimate, unc: FitUncertainty,
-                       settings: IdentificationSettings) -> tuple[str, ...]:
+                       settings: IdentificationSettings, geometry: Geometry | None = None) -> tuple[str, ...]:
     """Step 4: :class:`ImplausibleError` for physically impossible values (``settings.fit.plausibility``),
     :class:`UnidentifiableError` for std above ``max_relative_std`` of the value (unless
-    ``unexcited="report"``); the warnings of both."""
+    ``unexcited="report"``); the warnings of both. A model's breakaway levels are checked alike; its
+    centre-of-mass offset against the size of the platform (``geometry``; :func:`.model_fit.noisy_extensions`)."""
     warnings: list[str] = []
     estimated = [(n, float(v)) for n, v in zip(check.free, fitted.coef)
                  if n in PARAMETER_NAMES and n not in check.unbounded]
-    if settings.fit.plausibility:
-        refused, implausible = implausible_parameters(dict(estimated), _parameter_std(unc))
+    if settings.fit.plausibility:  # the breakaway levels of a model that has them are frictions too
+        breakaway = [(n, float(v)) for n, v in zip(check.free, fitted.coef)
+                     if n in BREAKAWAY_NAMES and n not in check.unbounded]
+        refused, implausible = implausible_parameters(dict(estimated + breakaway), unc.std)
         if refused:
             raise ImplausibleError(refused, None, "")
         warnings += implausible
     limit = settings.fit.max_relative_std
     noisy = [Dependency(n, (), math.nan, relative_std=float(unc.std[n] / abs(v)))
              for n, v in estimated if unc.std[n] > limit * abs(v)]
+    noisy += noisy_extensions(check, fitted.coef, unc.std, limit, geometry)
     if noisy and not settings.fit.reports_unexcited:
+        centre = (", or the platform's size for a centre-of-mass offset" if any(d.name in CENTRE_NAMES for d in noisy)
+                  else "")
         raise UnidentifiableError(noisy, f"weakly excited data (standard deviation above {100 * limit:g} % of the "
-                                         "value): ")
+                                         f"value{centre}): ")
     return tuple(warnings + [f"weakly excited: {d.describe()}" for d in noisy])
 
 
 def assemble(check: ExcitationCheck, fitted: Estimate, unc: FitUncertainty, warnings: Sequence[str], *,
              fixed: Mapping[str, float], settings: IdentificationSettings, geometry: Geometry,
-             account: RowAccount) -> Identification:
+             account: RowAccount, model: ModelSpec = PAPER_MODEL) -> Identification:
     """Step 5: the :class:`Identification` of the steps' results and the rows' account."""
     est, data = fitted.estimator, check.data
     theta = data.theta(est.coef_)
-    offsets = theta[N_P:] if settings.fit.torque_offsets else None
+    offsets = theta[N_P:N_P + len(OFFSET_NAMES)] if settings.fit.torque_offsets else None
+    parameters = Parameters.from_vector(theta[:N_P])
+    residual_rms = data.residual_rms(est.coef_)
+    extra, extra_std = extension_estimates(model, columns(fixed, settings.fit.torque_offsets, model)[0], theta,
+                                           check.free, unc.cov, unc.std)
     return Identification(
-        parameters=Parameters.from_vector(theta[:N_P]), std=_parameter_std(unc),
+        parameters=parameters, std=_parameter_std(unc),
         fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),
         condition_number=unc.cond, condition_number_unscaled=unc.cond_unscaled,
-        condition_number_with_offsets=unc.cond_with_offsets, residual_rms=data.residual_rms(est.coef_),
+        condition_number_with_offsets=unc.cond_with_offsets, residual_rms=residual_rms,
         n_rows=int(data.n_rows), n_samples=int(account.n_samples), blocks=tuple(account.blocks), settings=settings,
         geometry=geometry, sources=tuple(account.sources), notes=tuple(account.notes),
         estimator=getattr(est, "name", "") or type(est).__name__, std_classic=unc.std_classic,
@@ -249,7 +289,9 @@ def assemble(check: ExcitationCheck, fitted: Estimate, unc: FitUncertainty, warn
         offsets_std={n: unc.std[n] for n in OFFSET_NAMES if n in unc.std},
         rows=account.counts, slip_events=tuple(account.slip_events),
         slip_thresholds=dict(account.slip_thresholds),
-        warnings=tuple(check.warnings) + fitted.warnings + unc.warnings + tuple(warnings))
+        warnings=tuple(check.warnings) + fitted.warnings + unc.warnings + tuple(warnings)
+        + tuple(breakaway_warnings(extra, extra_std, parameters)),
+        model=model, extra=extra, extra_std=extra_std, residual_ss=residual_sums(data, est.coef_))
 
 
 def _correlation(cov: np.ndarray, names: Sequence[str], unbounded: set[str] = frozenset()) -> dict[str, Any]:

@@ -160,7 +160,8 @@ class LogReduction:
 
 def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
                   columns: np.ndarray | None = None, workspace: Workspace | None = None) -> LogReduction:
-    """The kept rows ``[H_k^T Theta | H_k^T B | H_k^T B u]`` of ``blocks`` (one log) gathered in one
+    """The kept rows ``[H_k^T Theta | H_k^T B | X | H_k^T B u]`` of ``blocks`` (one log; the offsets'
+    ``H_k^T B`` with ``offsets``, a model extension's columns X when the blocks carry them) gathered in one
     array (:func:`._kernels.kept_rows`; per block, coordinate by coordinate, in time order) and
     the triangular factor of each (segment, coordinate)."""
     keys: dict[tuple[str, str], int] = {}
@@ -191,8 +192,11 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
     start, recordings = 0, []
     nonzero = np.zeros((len(per_key), width + 1), dtype=bool)
     for b, key_of, group_of, m in plan:
-        offs = b.offset_regressor if offsets else np.zeros((0, 1, 4))
-        kept_rows(b.regressor, offs, b.torque, b.keep, b.sample, group_of, key_of, offsets, column,
+        extra = _extra_columns(b, offsets)
+        if N_P + extra.shape[2] != width:  # the kernel writes where the columns say: never past the row
+            raise ValueError(f"{b.source}: block {b.segment!r} has {N_P + extra.shape[2]} columns, the rows "
+                             f"{width}: the rows were made for another model or offset setting")
+        kept_rows(b.regressor, extra, b.torque, b.keep, b.sample, group_of, key_of, column,
                   rows[start:start + m], key[start:start + m], step[start:start + m], group[start:start + m],
                   by_key, cursor, nonzero)
         if recordings and recordings[-1][0] == b.recording:
@@ -205,6 +209,18 @@ def reduce_blocks(blocks: Sequence[EquationBlock], width: int, *, offsets: bool,
     counts = tuple(per_key)
     return LogReduction(tuple(keys), tuple(groups), factors, counts, rows, key, group, step,
                         tuple(tuple(r) for r in recordings))
+
+
+_NO_COLUMNS = np.zeros((0, 1, 0))
+
+
+def _extra_columns(block: EquationBlock, offsets: bool) -> np.ndarray:
+    """The columns after the paper's 11 of a block's rows: its motor-torque offsets (``offsets``),
+    then its model extension's columns (``model_regressor``), each when present."""
+    model = block.model_regressor
+    if model is None:
+        return block.offset_regressor if offsets else _NO_COLUMNS
+    return np.concatenate([block.offset_regressor, model], axis=2) if offsets else model
 
 
 def merge_reduction(reduction: LogReduction, stats: RowStatistics, store: RowStore | None,
@@ -391,7 +407,7 @@ def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Seq
 def stacked_regression_data(blocks: Sequence[EquationBlock], free: Sequence[int], theta_fixed: np.ndarray, *,
                             offsets: bool) -> RegressionData:
     """The reference: all kept rows stacked (eq. 22), in memory, as :func:`regression_data` sees them."""
-    stats = RowStatistics(N_P + (4 if offsets else 0))
+    stats = RowStatistics(len(theta_fixed))
     store = RowStore(budget=1 << 62)
     names: dict[str, int] = {}
     row_statistics(blocks, stats, store, names, offsets=offsets)

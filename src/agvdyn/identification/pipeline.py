@@ -20,6 +20,7 @@ from agvdyn.identification._threads import default_workers, ordered_map
 from agvdyn.identification.account import LogRows, RowAccount
 from agvdyn.identification.change import parameter_change_in_store
 from agvdyn.identification.fit import check_fixed, columns, fit_blocks, fit_regression
+from agvdyn.identification.model_rows import resolved_model
 from agvdyn.identification.normal import LogReduction, RowStatistics, RowStore, merge_reduction, reduce_blocks, regression_data
 from agvdyn.identification.plausibility import (
     ImplausibleError,
@@ -35,6 +36,7 @@ from agvdyn.identification.settings import CHASSIS_COORDINATES, DEFAULT_FIXED, O
 from agvdyn.identification.stretches import log_source
 from agvdyn.identification.workspace import Workspace, keep_freed_memory
 from agvdyn.io import Log, LogFile, load_logs, sidecar_platform
+from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.platform import PROTOTYPE, Geometry, read_platform
 
 __all__ = ["identify", "fit_blocks", "load_logs", "platform_for", "row_passes"]
@@ -57,18 +59,20 @@ def platform_for(logs: Sequence[LoadedLog], platform: Geometry | str | None = No
     return PROTOTYPE
 
 
-def row_passes(logs: Sequence[Log], geometry: Geometry, settings: IdentificationSettings = IdentificationSettings()
-               ) -> list[LogRows]:
+def row_passes(logs: Sequence[Log], geometry: Geometry, settings: IdentificationSettings = IdentificationSettings(),
+               *, model: ModelSpec = PAPER_MODEL) -> list[LogRows]:
     """The row pass of each log in memory (:func:`.rows.log_rows`), blocks kept: what
-    :func:`identify`, :func:`agvdyn.preflight.preflight` and the report share (``rows=``)."""
-    return [log_rows(log, geometry, settings) for log in logs]
+    :func:`identify`, :func:`agvdyn.preflight.preflight` and the report share (``rows=``; made with the
+    same resolved ``model`` as the identification)."""
+    return [log_rows(log, geometry, settings, model=model) for log in logs]
 
 
 def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = None, *,
              fixed: Mapping[str, float] = DEFAULT_FIXED,
              settings: IdentificationSettings = IdentificationSettings(),
              estimator: Estimator | None = None, experiment: str = "auto", keep_blocks: bool = True,
-             workers: int | None = None, rows: Sequence[LogRows] | None = None) -> Identification:
+             workers: int | None = None, rows: Sequence[LogRows] | None = None,
+             model: ModelSpec = PAPER_MODEL) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
 
     Logs are reduced one at a time (their kept rows to normal equations, see
@@ -91,6 +95,8 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
         result does not depend on it (logs are merged in their order).
     rows : the row passes of ``logs`` already made (:func:`row_passes`, logs in memory): they are
         used instead of passing the logs again.
+    model : a resolved :class:`agvdyn.model_spec.ModelSpec` (default the paper's); a delay ``'auto'`` or
+        unknown Stribeck velocities are a ValueError (searched, not fitted by one regression).
 
     The first call asks glibc to keep freed memory for reuse (:func:`.workspace.keep_freed_memory`).
 
@@ -111,15 +117,16 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
         raise ValueError(f"platform={platform!r}: expected a Geometry (read a platform file with read_platform)")
     if rows is not None and (len(rows) != len(items) or any(isinstance(x, LogFile) for x in items)):
         raise ValueError(f"rows: expected the row passes of the {len(items)} logs in memory, got {len(rows)}")
+    model = resolved_model(model)
     keep_freed_memory()
     geometry = platform if platform is not None else platform_for(items)
     checked = _vehicle_logs(items, experiment)
     jobs = _jobs(items, check_lifted=checked, rows=rows)
     workers = default_workers() if workers is None else int(workers)
     try:
-        return _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers)[0]
+        return _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers, model)[0]
     except (UnidentifiableError, ImplausibleError) as exc:
-        raise _diagnosis(exc, items, geometry, fixed, settings, estimator) from None
+        raise _diagnosis(exc, items, geometry, fixed, settings, estimator, model) from None
 
 
 def _items(logs: Any) -> list[LoadedLog]:
@@ -196,7 +203,8 @@ def _whole(item: LoadedLog, first: str | None, rows: LogRows | None, flip: tuple
 
 
 def _reduced_logs(jobs: Iterator[_Job], geometry: Geometry, settings: IdentificationSettings, width: int,
-                  order: np.ndarray, workers: int, reuse: bool) -> Iterator[tuple[Log, Any, LogRows, LogReduction]]:
+                  order: np.ndarray, workers: int, reuse: bool, model: ModelSpec = PAPER_MODEL
+                  ) -> Iterator[tuple[Log, Any, LogRows, LogReduction]]:
     """``(log, core, rows, reduction)`` of every log, in order: read, its row pass made (unless
     given) and its rows reduced (:func:`.normal.reduce_blocks`) in up to ``workers`` threads at a
     time (the compiled kernels, pyarrow and LAPACK release the GIL), at most ``workers + 1`` logs
@@ -210,7 +218,7 @@ def _reduced_logs(jobs: Iterator[_Job], geometry: Geometry, settings: Identifica
         if reuse and rows is None:  # the blocks are dropped once reduced: the next log of this thread reuses the buffers
             space = local.__dict__.setdefault("workspace", Workspace())
         if rows is None:
-            rows = log_rows(log, geometry, settings, core, space)
+            rows = log_rows(log, geometry, settings, core, space, model)
         reduction = reduce_blocks(rows.blocks, width, offsets=settings.fit.torque_offsets, columns=order,
                                   workspace=space)
         if reuse:
@@ -222,11 +230,11 @@ def _reduced_logs(jobs: Iterator[_Job], geometry: Geometry, settings: Identifica
 
 def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, float],
                 settings: IdentificationSettings, estimator: Estimator | None, keep_blocks: bool,
-                workers: int = 1) -> tuple[Identification, float]:
+                workers: int = 1, model: ModelSpec = PAPER_MODEL) -> tuple[Identification, float]:
     """Rows of each log reduced to normal equations as it is read (:mod:`.normal`), then one
     regression (:func:`.fit.fit_regression`); the identification and its residual RMS over all rows."""
     fixed = check_fixed(fixed)
-    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets)
+    _, _, idx_free, p_fixed = columns(fixed, settings.fit.torque_offsets, model)
     order = np.array(list(idx_free) + [i for i in range(len(p_fixed)) if i not in idx_free])  # free columns first
     stats, store, names = RowStatistics(len(p_fixed), columns=order), RowStore(columns=order), {}
     account = RowAccount()
@@ -234,7 +242,7 @@ def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, fl
     timing: list[tuple[str, float, float]] = []  # per stored recording: log, first time, sample time
     try:
         for log, core, rows, reduction in _reduced_logs(jobs, geometry, settings, len(p_fixed), order, workers,
-                                                        reuse=not keep_blocks):
+                                                        reuse=not keep_blocks, model=model):
             source = str(getattr(log, "path", None) or "<log>")
             if core is None or not account.sources or account.sources[-1] != source:
                 consumed, t0 = 0, float(log.t[0])
@@ -252,7 +260,7 @@ def _fit_stream(jobs: Iterator[_Job], geometry: Geometry, fixed: Mapping[str, fl
                 f"rows: {account.counts.to_dict()})")
         data = regression_data(stats, names, idx_free, p_fixed, store)
         ident = fit_regression(data, geometry, fixed=fixed, settings=settings, estimator=estimator, account=account,
-                               workers=workers)
+                               workers=workers, model=model)
         chassis = [code for code, name in enumerate(data.group_names) if name in CHASSIS_COORDINATES]
         ident = _with_parameter_change(ident, store, timing, chassis, workers)
         total = sum(ident.residual_rms.get(f"{s}:{c}", 0.0) ** 2 * n for (s, c), n in zip(data.keys, data.key_rows))
@@ -268,6 +276,8 @@ def _with_parameter_change(ident: Identification, store: RowStore, timing: list[
     theta = ident.parameters.to_vector()
     if ident.offsets:
         theta = np.concatenate([theta, [ident.offsets[n] for n in OFFSET_NAMES]])
+    if ident.extra_vector is not None:  # the model's columns follow the offsets in the store
+        theta = np.concatenate([theta, ident.extra_vector])
     changes = parameter_change_in_store(store, theta, timing, rows=chassis, workers=workers)
     if not changes:
         return ident
@@ -281,14 +291,15 @@ def _with_parameter_change(ident: Identification, store: RowStore, timing: list[
 
 
 def _diagnosis(exc: Exception, items: Sequence[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],
-               settings: IdentificationSettings, estimator: Estimator | None) -> Exception:
+               settings: IdentificationSettings, estimator: Estimator | None,
+               model: ModelSpec = PAPER_MODEL) -> Exception:
     """The error to raise for a refusal: a sign mistake the encoders or the torques reveal, or
     ``exc`` (with the likely cause, for an implausible estimate). Each hypothesis streams the logs
     again, one at a time (the first piece of a long file for the encoders)."""
     lenient = settings.replace(plausibility=False, uncertainty="classic")  # values and residuals only
 
     def refit(flip: tuple[str, ...], checked: IdentificationSettings = lenient) -> tuple[Identification, float]:
-        return _fit_stream(_jobs(items, flip=flip), geometry, fixed, checked, estimator, False)
+        return _fit_stream(_jobs(items, flip=flip), geometry, fixed, checked, estimator, False, model=model)
 
     candidates = encoder_sign_candidates((_head(x) for x in items), geometry, settings)  # the rolling constraints first
     if candidates:

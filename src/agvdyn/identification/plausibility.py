@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn.model_spec import BREAKAWAY_NAMES, EXTRA_UNITS
 from agvdyn.platform import PARAMETER_UNITS
 
 __all__ = ["POSITIVE", "NON_NEGATIVE", "SIGN_HYPOTHESES", "Implausible", "ImplausibleError", "SignConventionError",
@@ -60,7 +61,8 @@ class Implausible:
         what = "mass or inertia" if self.name in POSITIVE else "friction coefficient"
         need = "> 0" if self.name in POSITIVE else ">= 0"
         std = f" +- {self.std:.3g}" if math.isfinite(self.std) else ""
-        return f"{self.name} = {self.value:.4g}{std} {PARAMETER_UNITS[self.name]} (a {what}, expected {need})"
+        unit = PARAMETER_UNITS.get(self.name) or EXTRA_UNITS[self.name]
+        return f"{self.name} = {self.value:.4g}{std} {unit} (a {what}, expected {need})"
 
 
 class ImplausibleError(ValueError):
@@ -137,16 +139,18 @@ class SignConventionError(ImplausibleError):
 
 def implausible_parameters(values: dict[str, float], std: dict[str, float], *, significance: float = 3.0
                            ) -> tuple[list[Implausible], list[str]]:
-    """(refused, warnings): masses/inertias <= 0 are refused; a negative friction is refused when it is
-    below zero by more than ``significance`` std, else a warning (consistent with zero)."""
+    """(refused, warnings): masses/inertias <= 0 are refused; a negative friction (the breakaway levels
+    ``d_s`` of :mod:`agvdyn.model_spec` too) is refused when it is below zero by more than
+    ``significance`` std, else a warning (consistent with zero)."""
     refused, warnings = [], []
     for name, value in values.items():
         sd = std.get(name, math.nan)
         if name in POSITIVE and value <= 0:
             refused.append(Implausible(name, value, sd))
-        elif name in NON_NEGATIVE and value < 0:
+        elif (name in NON_NEGATIVE or name in BREAKAWAY_NAMES) and value < 0:
             if math.isfinite(sd) and -value <= significance * sd:
-                warnings.append(f"{name} = {value:.4g} {PARAMETER_UNITS[name]} is negative but within "
+                unit = PARAMETER_UNITS.get(name) or EXTRA_UNITS[name]
+                warnings.append(f"{name} = {value:.4g} {unit} is negative but within "
                                 f"{significance:g} std ({sd:.3g}) of zero: the data hardly see this friction")
             else:
                 refused.append(Implausible(name, value, sd))

@@ -28,14 +28,18 @@ def stacked_system(blocks: Sequence[EquationBlock], *, kept_only: bool = True, o
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Stacked regressor ``Theta_hat`` (m, 11) and right-hand side ``tau_hat`` (m,) of eq. (22).
 
-    ``offsets``: four more columns ``H_k^T B e_i`` for the motor-torque offsets (m, 15).
+    ``offsets``: four more columns ``H_k^T B e_i`` for the motor-torque offsets (m, 15); blocks with a
+    model extension's columns (``model_regressor``, :mod:`agvdyn.model_spec`) add those last.
     """
-    width = N_P + (4 if offsets else 0)
+    model = 0 if not blocks or blocks[0].model_regressor is None else blocks[0].model_regressor.shape[2]
+    width = N_P + (4 if offsets else 0) + model
     if not blocks:
         return np.zeros((0, width)), np.zeros(0)
 
     def columns(b: EquationBlock) -> np.ndarray:
-        full = np.concatenate([b.regressor, b.offset_regressor], axis=2) if offsets else b.regressor
+        parts = [b.regressor, *([b.offset_regressor] if offsets else []),
+                 *([] if b.model_regressor is None else [b.model_regressor])]
+        full = np.concatenate(parts, axis=2) if len(parts) > 1 else b.regressor
         return full.reshape(-1, width)
 
     A = [columns(b)[b.keep.ravel()] if kept_only else columns(b) for b in blocks]
@@ -72,10 +76,13 @@ class Dependency:
     relative_residual: float
     inflation: float = math.nan
     relative_std: float = math.nan
+    #: what ``relative_std`` is relative to (a centre-of-mass offset: the platform's size)
+    scale: str = "its value"
 
     def describe(self) -> str:
         if math.isfinite(self.relative_std):
-            how = f"its standard deviation is {100 * self.relative_std:.0f} % of its value: the data hardly excite it"
+            how = (f"its standard deviation is {100 * self.relative_std:.0f} % of {self.scale}: the data hardly "
+                   "excite it")
         elif math.isfinite(self.inflation):
             how = (f"its regressor column is nearly a combination of the others (variance inflation "
                    f"{self.inflation:.3g})")

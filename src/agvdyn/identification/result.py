@@ -12,9 +12,12 @@ import numpy as np
 from agvdyn._lazy import pandas as pd
 
 from agvdyn.identification.equations import EquationBlock
+from agvdyn.identification.model_fit import linear_values
 from agvdyn.identification.rows import RowCounts
 from agvdyn.identification.settings import OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.slip import SlipEvent
+from agvdyn.model_file import write_model_parameters
+from agvdyn.model_spec import EXTRA_NAMES, EXTRA_UNITS, PAPER_MODEL, ModelParameters, ModelSpec
 from agvdyn.platform import PARAMETER_NAMES, PARAMETER_UNITS, Geometry, ParameterFile, Parameters, write_parameters
 
 __all__ = ["Identification", "UncertaintySummary", "ParameterCorrelation"]
@@ -94,7 +97,14 @@ class Identification:
         ``slip_thresholds``: threshold used per log (m/s).
     offsets, offsets_std : estimated motor-torque offsets (motor side, N m) when
         ``settings.fit.torque_offsets``; the model torques of Fig. 5 include them.
-        ``condition_number_with_offsets``: cond of the scaled regressor with the offset columns.
+        ``condition_number_with_offsets``: cond of the scaled regressor with the offset columns (and
+        a model extension's columns).
+    model : the resolved :class:`~agvdyn.model_spec.ModelSpec` identified (the paper's by default);
+        ``extra``, ``extra_std``: its parameters beyond the paper's (``d_sl, d_sr, d_sw``, ``x_c, y_c``
+        estimated, with std, ``inf`` where the data do not determine them; ``w_sl, w_sr, w_sw`` as the
+        spec gives them, no std unless a search sets one); ``delay_std_s``: the std of the delay when a
+        search found it (None: given).
+    residual_ss : ``{coordinate group: (residual sum of squares, rows)}`` over the kept rows.
     """
 
     parameters: Parameters
@@ -126,15 +136,33 @@ class Identification:
     quantiles: dict[str, float] = field(default_factory=dict)  # of ci95 per parameter; default 1.96
     #: m_ch / C_ch changed within a recording (:func:`.change.parameter_change_in_store`): time, size, std
     parameter_change: dict[str, Any] | None = None
+    model: ModelSpec = PAPER_MODEL
+    extra: dict[str, float] = field(default_factory=dict)
+    extra_std: dict[str, float] = field(default_factory=dict)
+    delay_std_s: float | None = None
+    residual_ss: dict[str, tuple[float, int]] = field(default_factory=dict)
 
     def ci95(self, name: str) -> tuple[float, float] | None:
         """95 % interval ``value +- q std`` of an estimated parameter (q: Student's t of the
-        uncertainty's degrees of freedom, 1.96 when the variance is taken as known), None for a fixed one."""
-        if name not in self.std:
+        uncertainty's degrees of freedom, 1.96 when the variance is taken as known), None for a fixed one;
+        the extensions' parameters (:data:`agvdyn.model_spec.EXTRA_NAMES`) alike."""
+        std = self.extra_std if name in EXTRA_NAMES else self.std
+        if name not in std:
             return None
-        v, s = getattr(self.parameters, name), self.std[name]
+        v, s = (self.extra[name] if name in EXTRA_NAMES else getattr(self.parameters, name)), std[name]
         q = self.quantiles.get(name, 1.959964)
         return (v - q * s, v + q * s)
+
+    @property
+    def model_parameters(self) -> ModelParameters:
+        """The identified model: the paper's parameters, the extensions' and the delay (s)."""
+        return ModelParameters(self.parameters, dict(self.extra), float(self.model.delay), self.model)
+
+    @property
+    def extra_vector(self) -> np.ndarray | None:
+        """Values of the model's regression columns (``model.linear_names``: ``d_s``, ``m_ch x_c``,
+        ``m_ch y_c``), None for a model without columns."""
+        return linear_values(self.model, self.extra, self.parameters)
 
     def _parameter_entries(self) -> dict[str, dict[str, Any]]:
         """Per parameter value, std, ci95, std_classic; an unbounded interval (not excited) is
@@ -149,7 +177,20 @@ class Identification:
                 entry["std"] = self.std[n] if bounded else None
                 entry["identified"] = bounded
             out[n] = entry
+        for n in EXTRA_NAMES:  # the model's parameters beyond the paper's, when it has them
+            if n in self.extra:
+                entry = {"value": self.extra[n], "std": None, "unit": EXTRA_UNITS[n]}
+                if n in self.extra_std:
+                    bounded = math.isfinite(self.extra_std[n])
+                    entry.update(std=self.extra_std[n] if bounded else None,
+                                 ci95=list(self.ci95(n)) if bounded else [None, None], identified=bounded)
+                out[n] = entry
         return out
+
+    def _model_entry(self) -> dict[str, Any]:
+        """The JSON ``model``: friction law, delay (s) and its std (None: given), com_offset."""
+        return {"friction": self.model.friction, "delay_s": float(self.model.delay), "delay_std_s": self.delay_std_s,
+                "com_offset": self.model.com_offset}
 
     @property
     def offset_vector(self) -> np.ndarray | None:
@@ -165,14 +206,19 @@ class Identification:
             rows.append({"name": name, "value": value, "std": std,
                          "rel_std": std / abs(value) if value != 0 else float("nan"),
                          "unit": PARAMETER_UNITS[name], "fixed": name in self.fixed})
+        for name in (n for n in EXTRA_NAMES if n in self.extra):
+            value, std = self.extra[name], self.extra_std.get(name, float("nan"))
+            rows.append({"name": name, "value": value, "std": std,
+                         "rel_std": std / abs(value) if value != 0 else float("nan"),
+                         "unit": EXTRA_UNITS[name], "fixed": name not in self.extra_std})
         return pd.DataFrame(rows).set_index("name")
 
     def torques_frame(self) -> pd.DataFrame:
         """Measured and model generalized torques per row (long format, Fig. 5)."""
-        p = self.parameters.to_vector()
+        p, extra = self.parameters.to_vector(), self.extra_vector
         frames = []
         for b in self.blocks:
-            model = b.model_torque(p, self.offset_vector)
+            model = b.model_torque(p, self.offset_vector, extra)
             for j, coord in enumerate(b.coordinates):
                 frames.append(pd.DataFrame({
                     "source": b.source, "segment": b.segment, "mode": b.mode.label, "coordinate": coord,
@@ -207,13 +253,18 @@ class Identification:
         }
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the parameter file (YAML, or JSON by suffix) atomically."""
-        return write_parameters(path, self.to_parameter_file())
+        """Write the parameter file (YAML, or JSON by suffix) atomically; a model beyond the paper's
+        with its parameters inside ``parameters`` and its ``model:`` block (:mod:`agvdyn.model_file`,
+        read back by :func:`agvdyn.model_file.read_model_parameters`)."""
+        if self.model.is_paper and not self.extra:
+            return write_parameters(path, self.to_parameter_file())
+        return write_model_parameters(path, self.to_parameter_file(), self.model, self.extra, self.extra_std)
 
     def to_json_dict(self) -> dict[str, Any]:
         """The summary printed by ``agvdyn identify --json``."""
         return {
             "parameters": self._parameter_entries(),
+            "model": self._model_entry(),
             "condition_number": self.condition_number,
             "condition_number_unscaled": self.condition_number_unscaled,
             "condition_number_with_offsets": (None if not math.isfinite(self.condition_number_with_offsets)

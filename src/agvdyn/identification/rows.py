@@ -28,12 +28,14 @@ from agvdyn.identification._kernels import stretch_modes, stretch_projection
 from agvdyn.io.schema import SEGMENTS, LazyFrame
 from agvdyn.identification.account import LogRows, RowCounts
 from agvdyn.identification.equations import EquationBlock
+from agvdyn.identification.model_rows import model_projection_columns, resolved_model
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretches_of
 from agvdyn.identification.workspace import Workspace, empty
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering
 from agvdyn.kinematics.models import _constant_model
+from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.platform import Geometry
 from agvdyn.row_rules import RowSettings
 from agvdyn.segments_vocabulary import label_modes
@@ -180,10 +182,12 @@ def _count_mismatch(counts: RowCounts, labels: _Labels, sl: slice, mode: np.ndar
 
 def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.ndarray, usable: np.ndarray,
                     labels: _Labels | None, settings: IdentificationSettings, recording: str, mine: np.ndarray,
-                    workspace: Workspace | None = None, tag: str = "") -> list[EquationBlock]:
+                    workspace: Workspace | None = None, tag: str = "", model: ModelSpec = PAPER_MODEL
+                    ) -> list[EquationBlock]:
     """Blocks of one stretch: a run of one mode is projected at once (stiction guard at its ends),
     then split where the label changes (block names only: no filter starts there). The rows of all
-    runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views."""
+    runs come from one compiled pass (:func:`._kernels.stretch_projection`); blocks are views. A
+    ``model`` with columns of its own (``linear_names``) adds them to each block (:mod:`.model_rows`)."""
     guards = _guard_samples(settings.rows, float(st.dt))
     tables = _tables(geometry, settings)
     n = st.n
@@ -194,6 +198,11 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
     count = stretch_projection(mode, av, st.q_dot, st.signals, st.torque, tables.h, tables.pinv, tables.dof, tables.thresholds,
                                usable, mine, guards, geometry.l, geometry.b, geometry.a, geometry.r,
                                max_virtual_angle(geometry), geometry.i_G, Y, tau, s_dot, keep, offsets, runs_found)
+    X = None
+    if model.linear_names:
+        X = empty(workspace, f"model{tag}", (n, 2, len(model.linear_names)))
+        model_projection_columns(model, mode, av, runs_found, count, st.signals, st.extra, tables.h, tables.dof,
+                                 geometry, max_virtual_angle(geometry), Y, X)
     blocks = []
     sample = np.arange(st.rows.start, st.rows.start + n)
     codes = None if labels is None else labels.codes[st.rows]
@@ -213,12 +222,14 @@ def _stretch_blocks(geometry: Geometry, st: Stretch, mode: np.ndarray, av: np.nd
         for c, d in zip(cuts, cuts[1:]):  # a run split where the label changes (block names only)
             name = f"mode {m.label}" if codes is None else labels.names[codes[c]] or f"mode {m.label}"
             blocks.append(EquationBlock(st.source, name, m, st.t[c:d], Y[c:d, :k], tau[c:d, :k], s_dot[c:d, :k],
-                                        keep[c:d, :k], offs[c:d], recording, sample[c:d]))
+                                        keep[c:d, :k], offs[c:d], recording, sample[c:d],
+                                        None if X is None else X[c:d, :k]))
     return blocks
 
 
 def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = IdentificationSettings(),
-             core: slice | None = None, workspace: Workspace | None = None) -> LogRows:
+             core: slice | None = None, workspace: Workspace | None = None, model: ModelSpec = PAPER_MODEL
+             ) -> LogRows:
     """The row pass of a log: stretches filtered once, rows classified, slip and stiction dropped,
     the rows kept as equation blocks and their account (:class:`LogRows`). Every consumer
     (:func:`~agvdyn.identification.identify`, :func:`agvdyn.preflight.preflight`, the report's
@@ -227,8 +238,10 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     ``core``: for a piece of a longer log (:func:`agvdyn.io.chunks.log_pieces`), the rows that are
     its own; the others (its neighbours' overlap) are filtered but neither used nor counted.
     ``workspace``: buffers reused from the previous log; the blocks are then views valid only
-    until the next log that uses it (see :mod:`.workspace`).
+    until the next log that uses it (see :mod:`.workspace`). ``model``: a resolved
+    :class:`~agvdyn.model_spec.ModelSpec` whose extensions the rows carry (:mod:`.model_rows`).
     """
+    model = resolved_model(model)
     source = log_source(log)
     t = log.t
     labels = _Labels.of(log)
@@ -239,7 +252,8 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
     counts = RowCounts(samples=int(own.sum()), clipped_stop={k: int(v) for k, v in getattr(log, "clipped", {}).items()})
     bounds, cuts, nominal = stretches_of(t, log.alpha, log.beta, settings, getattr(log, "sample_time", None))
     notes = [f"{source}: {n}" for n in cuts]
-    stretches, modes = _classified_stretches(log, geometry, settings, bounds, nominal, own, counts, notes, workspace)
+    stretches, modes = _classified_stretches(log, geometry, settings, bounds, nominal, own, counts, notes, workspace,
+                                             model)
     peaks = [row_max_abs(st.slip) for st, _ in stretches]
     speeds = np.concatenate([p[(modes[st.rows] != NO_MODE) & ~st.edge] for p, (st, _) in zip(peaks, stretches)]
                             or [np.zeros(0)])
@@ -253,7 +267,7 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
         events += ev
         usable = _usable_rows(st, modes[st.rows], drop_slip, labels, settings, own[st.rows], counts)
         blocks += _stretch_blocks(geometry, st, modes[st.rows], av, usable, labels, settings, f"{source}#{k}",
-                                  own[st.rows], workspace, f"#{k}")
+                                  own[st.rows], workspace, f"#{k}", model)
     gaps = tuple((float(t[b - 1]), float(t[c])) for (_, b), (c, _) in zip(bounds[:-1], bounds[1:]))
     present = frozenset() if labels is None else frozenset(_present(labels))
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes, tuple(cuts), gaps,
@@ -262,8 +276,8 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
 
 def _classified_stretches(log: Any, geometry: Geometry, settings: IdentificationSettings,
                           bounds: list[tuple[int, int]], nominal: float, own: np.ndarray, counts: RowCounts,
-                          notes: list[str], workspace: Workspace | None) -> tuple[list[tuple[Stretch, np.ndarray]],
-                                                                                  np.ndarray]:
+                          notes: list[str], workspace: Workspace | None, model: ModelSpec = PAPER_MODEL
+                          ) -> tuple[list[tuple[Stretch, np.ndarray]], np.ndarray]:
     """Each stretch long enough filtered once and its rows' modes (the others counted and noted):
     ``[(stretch, virtual angle)]`` and the mode of every sample of the log (0: none)."""
     source, size = log_source(log), log.t.size
@@ -276,7 +290,7 @@ def _classified_stretches(log: Any, geometry: Geometry, settings: Identification
                          f"than {min_rows} samples for the zero-phase filter and its edges")
             continue
         st = filtered_stretch(geometry, log, a, b, settings, workspace, f"#{len(stretches)}",
-                              nominal if (a, b) == (0, size) else None)  # one stretch: the log's median step
+                              nominal if (a, b) == (0, size) else None, model)  # one stretch: the log's median step
         mode, av = _modes_and_virtual_angle(geometry, st, settings)
         stretches.append((st, av))
         modes[a:b] = mode

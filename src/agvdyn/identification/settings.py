@@ -59,6 +59,13 @@ EXCITATION: Mapping[str, str] = MappingProxyType({
     **dict.fromkeys(OFFSET_NAMES, "the four identification segments together (steer_left, steer_right, straight and "
                                   "rotation each see another combination of the motor offsets), or no offset "
                                   "estimation (--no-offsets)"),
+    # the model extensions' columns (agvdyn.model_spec): breakaway levels, m_ch x_c and m_ch y_c
+    **{f"d_s{g}": f"{what} with rows at joint rates below the Stribeck velocity w_s{g} (slow reversals; the "
+                  f"stiction threshold and guard drop them: lower {threshold})"
+       for g, what, threshold in (("l", "steer_left", "steering_threshold"), ("r", "steer_right", "steering_threshold"),
+                                  ("w", "straight, lateral or rotation", "stiction_threshold"))},
+    **dict.fromkeys(("x_c", "y_c"), "translation with rotation: car-like turns (agvdyn simulate car-like, or a lane "
+                                    "change); straight, lateral and rotation alone leave the centre of mass unseen"),
 })
 
 

@@ -19,8 +19,10 @@ import numpy as np
 
 from agvdyn._zero_phase import filtfilt_in_place
 from agvdyn.identification._kernels import SIGNAL_CHANNELS, copy_rows, recording_breaks, stretch_motion
+from agvdyn.identification.model_rows import fill_model_channels, model_channels, stretch_torque
 from agvdyn.identification.settings import Filtering, IdentificationSettings
 from agvdyn.identification.workspace import Workspace, empty
+from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.platform import Geometry
 from agvdyn.signals import FilterSettings, filter_design, lowpass, uniform_sample_time
 from agvdyn.time_base import stamp_interval
@@ -43,8 +45,9 @@ class Stretch:
     angles (views: ``alpha_dot``, ``beta_dot``, ``chassis_dot``, ...); ``slip`` (n, 4) slip speed per wheel (m/s);
     ``signals`` (n, 21) entries of Theta (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and
     ``torque`` (n, 4) motor torques, both filtered alike in PARALLEL filtering; ``edge`` (n,)
-    rows within the filter's transient of either end; ``trig`` (n, 4) sin and cos of the left and
-    right steering angle.
+    rows within the filter's transient of either end (and, with a torque delay, rows whose shifted
+    torque falls outside the stretch); ``trig`` (n, 4) sin and cos of the left and right steering
+    angle; ``extra`` (n, q) the model extensions' channels (:mod:`.model_rows`; q = 0 for the paper's).
     """
 
     source: str
@@ -58,6 +61,7 @@ class Stretch:
     torque: np.ndarray
     edge: np.ndarray
     trig: np.ndarray
+    extra: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -169,13 +173,15 @@ def slip_filter(settings: IdentificationSettings, dt: float) -> FilterSettings:
 
 
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
-                     workspace: Workspace | None = None, tag: str = "", median_step: float | None = None) -> Stretch:
+                     workspace: Workspace | None = None, tag: str = "", median_step: float | None = None,
+                     model: ModelSpec = PAPER_MODEL) -> Stretch:
     """Filter, differentiate and evaluate one stretch ``[start, stop)`` of a log once.
 
     The angles are low-passed in one compiled pass (the steering angles once more through the
     lighter slip filter), then :func:`._kernels.stretch_motion` takes derivatives, odometry (eq. 3),
     slip speeds, the entries of Theta and the aligned torques in one pass, written straight into
-    the buffer of the second filter (PARALLEL: all 25 channels).
+    the buffer of the second filter (PARALLEL: all 25 channels, and the channels a resolved
+    ``model`` adds, :mod:`.model_rows`; its delay reads the torques later).
 
     ``workspace``: buffers reused from the previous log (``tag`` tells this stretch's apart from
     the log's others); the arrays are then valid until the next log. ``median_step``: the median
@@ -202,22 +208,25 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
     copy_rows(fast[fast_pad:fast_pad + n], log.alpha[sl])
     fast = filtfilt_in_place(fast_sos, fast_zi, fast, fast_pad)
     alpha, trig = empty(workspace, f"alpha{tag}", (n, 2)), empty(workspace, f"trig{tag}", (n, 4))
-    slip = empty(workspace, f"slip{tag}", (n, 4))
+    slip, tanh = empty(workspace, f"slip{tag}", (n, 4)), empty(workspace, f"tanh{tag}", (n, 6))
     q_dot = empty(workspace, f"q_dot{tag}", (n, 9))
-    both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS))
+    both = empty(workspace, f"signals{tag}", (n + 2 * pad, SIGNAL_CHANNELS + model_channels(model)))
     middle = both[pad:pad + n]
-    torque = np.asarray(log.torque[sl], dtype=float)  # a view of the log's columns: the kernel reads it strided
+    # a view of the log's columns (the kernel reads it strided), or the torques the model's delay reads
+    torque, late_front, late_back = stretch_torque(np.asarray(log.torque[sl], dtype=float), model, dt)
     wheels = empty(workspace, f"wheels{tag}", (n, 4))  # raw: the slip's wheel rates (encoders resolve 1e-4 rad)
     copy_rows(wheels, log.beta[sl])
     stretch_motion(f, fast, wheels, dt, geometry.l, geometry.b, geometry.a, geometry.r, float(settings.rows.epsilon),
-                   torque, torque_lead(log, settings), alpha, trig, q_dot, slip, middle,
-                   empty(workspace, f"tanh{tag}", (n, 6)))
+                   torque, torque_lead(log, settings), alpha, trig, q_dot, slip, middle, tanh)
+    if not model.is_paper:
+        fill_model_channels(model, q_dot, tanh, middle[:, SIGNAL_CHANNELS:])
     if settings.rows.filtering is Filtering.PARALLEL:
         filtfilt_in_place(sos, zi, both, pad)
     else:
-        middle[:, 21:] = lowpass(middle[:, 21:], dt, settings.rows.filter)
+        middle[:, 21:SIGNAL_CHANNELS] = lowpass(middle[:, 21:SIGNAL_CHANNELS], dt, settings.rows.filter)
     k = edge_rows(settings, dt)
     edge = np.zeros(n, dtype=bool)
-    edge[:k] = True
-    edge[max(n - k, 0):] = True
-    return Stretch(source, sl, t, dt, alpha, q_dot, slip, middle[:, :21], middle[:, 21:], edge, trig)
+    edge[:k + late_front] = True
+    edge[max(n - k - late_back, 0):] = True
+    return Stretch(source, sl, t, dt, alpha, q_dot, slip, middle[:, :21], middle[:, 21:SIGNAL_CHANNELS], edge, trig,
+                   middle[:, SIGNAL_CHANNELS:])
