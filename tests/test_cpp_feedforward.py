@@ -27,6 +27,7 @@ from agvdyn import ffcpp
 from agvdyn.cli._app import app
 from agvdyn.dynamics import feedforward_torques
 from agvdyn.kinematics import Mode, joint_motion
+from agvdyn.model_spec import ModelParameters, ModelSpec
 from agvdyn.platform import (
     PAPER_PARAMETERS,
     PAPER_STD,
@@ -89,6 +90,80 @@ def test_vectors_file_is_current():
             np.testing.assert_allclose(old[key], new[key], rtol=1e-12, atol=1e-14,
                                        err_msg=f"{key}: regenerate with `.venv/bin/python cpp/tests/make_vectors.py`")
     assert [(c["mode"], c["status"]) for c in stored["invalid"]] == [(c["mode"], c["status"]) for c in fresh["invalid"]]
+    assert stored["extended_models"] == fresh["extended_models"]
+    assert len(stored["extended_cases"]) == len(fresh["extended_cases"]) >= 200
+    for old, new in zip(stored["extended_cases"], fresh["extended_cases"]):
+        assert (old["model"], old["mode"]) == (new["model"], new["mode"])
+        for key in ("alpha", "s_dot", "s_ddot", "q_dot", "q_ddot", "u"):
+            np.testing.assert_allclose(old[key], new[key], rtol=1e-12, atol=1e-14,
+                                       err_msg=f"{key}: regenerate with `.venv/bin/python cpp/tests/make_vectors.py`")
+
+
+def _extended_models(vectors) -> list[tuple[Geometry, ModelParameters]]:
+    vehicles = _models(vectors)
+    out = []
+    for m in vectors["extended_models"]:
+        geom, params = vehicles[m["vehicle"]]
+        spec = ModelSpec(friction=m["model"]["friction"], delay=m["model"]["delay_s"], com_offset=m["model"]["com_offset"])
+        out.append((geom, ModelParameters(params, m["extra"], m["model"]["delay_s"], spec)))
+    return out
+
+
+def test_extension_meets_the_extended_model_vectors(vectors):
+    """Stribeck friction per joint group, an off-centre centre of mass and a delay: the C++ library
+    through the extension equals the stored Python torques (1e-9 relative), and the models differ
+    from the paper's on these cases (the vectors test something)."""
+    tol = vectors["tolerance"]
+    models = _extended_models(vectors)
+    worst, changed = 0.0, 0.0
+    for (index, label), group in pd.DataFrame(vectors["extended_cases"]).groupby(["model", "mode"]):
+        geom, model = models[index]
+        alpha, s_dot, s_ddot = (np.array(group[k].tolist()) for k in ("alpha", "s_dot", "s_ddot"))
+        u = ffcpp.feedforward_torques(geom, model, label, alpha, s_dot, s_ddot)
+        reference = np.array(group["u"].tolist())
+        worst = max(worst, _close(u, reference, tol["relative"], tol["absolute"]))
+        paper = feedforward_torques(geom, model.parameters, label, alpha, s_dot, s_ddot)
+        changed = max(changed, float(np.max(np.abs(paper - reference) / np.abs(reference).max())))
+    assert worst < 1e-10
+    assert changed > 0.05
+    print(f"extended vectors: largest deviation {worst:.3g} of the largest torque")
+
+
+def test_random_extended_models_agree_with_the_reference():
+    from conftest import configurations
+
+    rng = np.random.default_rng(30)
+    p = PAPER_PARAMETERS
+    extra = {"d_sl": 1.3 * p.d_cl, "d_sr": 0.9 * p.d_cr, "d_sw": 1.5 * p.d_cw, "w_sl": 0.05, "w_sr": 0.2,
+             "w_sw": 0.02, "x_c": -0.2, "y_c": 0.15}
+    for spec in (ModelSpec(friction="stribeck"), ModelSpec(com_offset=True),
+                 ModelSpec(friction="stribeck", com_offset=True, delay=0.004)):
+        wanted = {k: v for k, v in extra.items() if k in spec.linear_names or (spec.stribeck and k.startswith("w_s"))}
+        model = ModelParameters(p, wanted, float(spec.delay), spec)
+        for mode in Mode:
+            alpha = configurations(PROTOTYPE, mode, 1000, rng)
+            s_dot = rng.uniform(-1, 1, (1000, mode.dof)) * 10.0 ** rng.uniform(-2.5, 0, (1000, 1))
+            s_ddot = rng.uniform(-2, 2, (1000, mode.dof))
+            reference = feedforward_torques(PROTOTYPE, model, mode, alpha, s_dot, s_ddot)
+            _close(ffcpp.feedforward_torques(PROTOTYPE, model, mode, alpha, s_dot, s_ddot), reference, RELATIVE, 1e-12)
+
+
+def test_paper_model_as_model_parameters_is_the_paper_model():
+    rng = np.random.default_rng(6)
+    alpha = np.zeros((50, 2))
+    s_dot, s_ddot = rng.normal(size=(2, 50, 1))
+    u = ffcpp.feedforward_torques(PROTOTYPE, PAPER_PARAMETERS, "2s", alpha, s_dot, s_ddot)
+    assert np.array_equal(ffcpp.feedforward_torques(PROTOTYPE, ModelParameters(PAPER_PARAMETERS), "2s", alpha, s_dot,
+                                                    s_ddot), u)
+
+
+def test_cpp_model_refuses_a_bad_extension():
+    core = ffcpp.extension()
+    args = ((1.2, 0.8, 0.05, 0.1, 25.0), list(PAPER_PARAMETERS.to_vector()), 0.01, 0.02, 1e-6)
+    with pytest.raises(ValueError, match="Stribeck velocities > 0"):
+        core.Model(*args, stribeck=True, d_s=(1.0, 1.0, 1.0), w_s=(0.1, 0.0, 0.1))
+    with pytest.raises(ValueError, match="invalid_model"):
+        core.Model(*args, com_offset=True, x_c=math.nan)
 
 
 def test_extension_meets_the_vectors(vectors):
@@ -186,6 +261,55 @@ def test_cli_engines_agree(tmp_path, params_file, experiment):
     _close(cpp[TORQUES].to_numpy(), python[TORQUES].to_numpy(), RELATIVE, 1e-12)
     assert set(python["mode"]) >= ({"1", "2s", "4"} if "identification" in experiment else {"1"} if "lateral" in
                                    experiment else set())
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory) -> Path:
+    """A parameter file of a model beyond the paper (as `agvdyn identify --model` writes it)."""
+    from agvdyn.model_file import write_model_parameters
+
+    p = PAPER_PARAMETERS.replace(m_ch=910.0, d_cw=4.4)
+    extra = {"d_sl": 1.3 * p.d_cl, "d_sr": 1.2 * p.d_cr, "d_sw": 1.4 * p.d_cw, "w_sl": 0.05, "w_sr": 0.05,
+             "w_sw": 0.02, "x_c": 0.15, "y_c": -0.1}
+    spec = ModelSpec(friction="stribeck", com_offset=True, delay=0.004)
+    path = tmp_path_factory.mktemp("cpp_model") / "model.yaml"
+    return write_model_parameters(path, ParameterFile(p, geometry=PROTOTYPE), spec, extra, {"d_sl": 0.2})
+
+
+def test_cli_feedforward_uses_the_extended_model(tmp_path, params_file, model_file):
+    """A model block changes the torques (the extended model's, equal in both engines) and nothing else."""
+    from agvdyn.model_file import read_model_parameters
+    from agvdyn.simulation import feedforward_table
+
+    python = _table(tmp_path, "lane-change", model_file, "python")
+    cpp = _table(tmp_path, "lane-change", model_file, "cpp")
+    (tmp_path / "paper").mkdir()
+    paper = _table(tmp_path / "paper", "lane-change", params_file, "python")
+    _close(cpp[TORQUES].to_numpy(), python[TORQUES].to_numpy(), RELATIVE, 1e-12)
+    pd.testing.assert_frame_equal(python.drop(columns=TORQUES), paper.drop(columns=TORQUES))
+    assert np.abs(python[TORQUES].to_numpy() - paper[TORQUES].to_numpy()).max() > 0.05
+    reference = feedforward_table("lane-change", read_model_parameters(model_file), PROTOTYPE)
+    np.testing.assert_array_equal(python[TORQUES].to_numpy(), reference[TORQUES].to_numpy())
+
+
+def test_cpp_reader_reads_a_model_block(model_file, tmp_path):
+    from agvdyn.model_file import read_model_parameters
+
+    python = read_model_parameters(model_file)
+    cpp = ffcpp.read_parameter_file(model_file)
+    assert cpp["model"] == {"friction": "stribeck", "delay_s": 0.004, "com_offset": True}
+    assert cpp["extra"] == python.extra
+    assert cpp["parameters"] == python.parameters.to_dict()
+    plain = write_parameters(tmp_path / "plain.json", ParameterFile(PAPER_PARAMETERS))
+    assert ffcpp.read_parameter_file(plain)["model"] is None and ffcpp.read_parameter_file(plain)["extra"] == {}
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(model_file.read_text().replace("com_offset: true", "com_offset: maybe"))
+    with pytest.raises(ValueError, match=r"bad\.yaml: model\.com_offset=maybe: expected true or false"):
+        ffcpp.read_parameter_file(bad)
+    missing = tmp_path / "missing.yaml"
+    missing.write_text("\n".join(line for line in model_file.read_text().splitlines() if "x_c" not in line))
+    with pytest.raises(ValueError, match=r"missing parameters \[x_c\]"):
+        ffcpp.read_parameter_file(missing)
 
 
 def test_cli_names_a_missing_extension(tmp_path, params_file, monkeypatch):
@@ -286,7 +410,10 @@ CONTROL_LOOP = ROOT / "build" / "cpp" / "control_loop"
 
 
 @pytest.mark.skipif(not CONTROL_LOOP.exists(), reason="build/cpp/control_loop not built (make cpp)")
-def test_example_control_loop_reproduces_a_feedforward_table(tmp_path, params_file):
+@pytest.mark.parametrize("which", ["paper", "extended"])
+def test_example_control_loop_reproduces_a_feedforward_table(tmp_path, params_file, model_file, which):
+    """The example loop reads the parameter file's model (a model block: the extended model's torques)."""
+    params_file = params_file if which == "paper" else model_file
     table = tmp_path / "lane.csv"
     result = runner.invoke(app, ["feedforward", "lane-change", "--params", str(params_file), "--out", str(table)])
     assert result.exit_code == 0, result.output

@@ -27,9 +27,25 @@ namespace {
 using In2 = nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using Out2 = nb::ndarray<double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 
+using Triple = std::tuple<double, double, double>;
+
+// The model beyond the paper (agvdyn.model_spec.ModelParameters) as ff::Extension.
+ff::Extension make_extension(bool stribeck, Triple d_s, Triple w_s, bool com_offset, double x_c, double y_c,
+                             double delay_s) {
+  ff::Extension e;
+  e.stribeck = stribeck;
+  e.d_s = {std::get<0>(d_s), std::get<1>(d_s), std::get<2>(d_s)};
+  e.w_s = {std::get<0>(w_s), std::get<1>(w_s), std::get<2>(w_s)};
+  e.com_offset = com_offset;
+  e.x_c = x_c;
+  e.y_c = y_c;
+  e.delay_s = delay_s;
+  return e;
+}
+
 ff::Model make_model(std::tuple<double, double, double, double, double> geometry,
                      const std::vector<double>& parameters, double epsilon, double mode_tolerance,
-                     double stop_tolerance) {
+                     double stop_tolerance, const ff::Extension& extension) {
   if (parameters.size() != 11) throw std::invalid_argument("expected 11 parameters in the order of eq. (18)");
   const auto [l, b, a, r, i_G] = geometry;
   ff::Vector11 p;
@@ -39,10 +55,12 @@ ff::Model make_model(std::tuple<double, double, double, double, double> geometry
   settings.mode_tolerance = mode_tolerance;
   settings.stop_tolerance = stop_tolerance;
   ff::Model model;
-  const ff::Status status = ff::Model::create(ff::Geometry{l, b, a, r, i_G}, ff::Parameters::from_vector(p), settings, &model);
+  const ff::Status status = ff::Model::create(ff::Geometry{l, b, a, r, i_G}, ff::Parameters::from_vector(p), extension,
+                                              settings, &model);
   if (status != ff::Status::ok) {
     throw std::invalid_argument(std::string("agvdyn_ff model: ") + ff::to_string(status) +
-                                ": expected l, b, r, i_G > 0, |a| < min(l, b)/2, finite parameters, epsilon > 0");
+                                ": expected l, b, r, i_G > 0, |a| < min(l, b)/2, finite parameters, epsilon > 0, "
+                                "finite extra parameters and Stribeck velocities > 0");
   }
   return model;
 }
@@ -128,6 +146,23 @@ nb::dict parameter_file(const std::string& path) {
     out["platform"] = g;
   } else {
     out["platform"] = nb::none();
+  }
+  if (file.has_model) {
+    const ff::Extension& e = file.extension;
+    nb::dict model;
+    model["friction"] = e.stribeck ? "stribeck" : "paper";
+    model["delay_s"] = e.delay_s;
+    model["com_offset"] = e.com_offset;
+    out["model"] = model;
+    const double values[8] = {e.d_s[0], e.d_s[1], e.d_s[2], e.w_s[0], e.w_s[1], e.w_s[2], e.x_c, e.y_c};
+    nb::dict extra;
+    for (std::size_t k = 0; k < 8; ++k) {
+      if (k < 6 ? e.stribeck : e.com_offset) extra[ff::Extension::names[k]] = values[k];
+    }
+    out["extra"] = extra;
+  } else {
+    out["model"] = nb::none();
+    out["extra"] = nb::dict();
   }
   return out;
 }
@@ -283,12 +318,17 @@ NB_MODULE(_core, m) {
       .def(
           "__init__",
           [](ff::Model* self, std::tuple<double, double, double, double, double> geometry,
-             const std::vector<double>& parameters, double epsilon, double mode_tolerance, double stop_tolerance) {
-            new (self) ff::Model(make_model(geometry, parameters, epsilon, mode_tolerance, stop_tolerance));
+             const std::vector<double>& parameters, double epsilon, double mode_tolerance, double stop_tolerance,
+             bool stribeck, Triple d_s, Triple w_s, bool com_offset, double x_c, double y_c, double delay_s) {
+            new (self) ff::Model(make_model(geometry, parameters, epsilon, mode_tolerance, stop_tolerance,
+                                            make_extension(stribeck, d_s, w_s, com_offset, x_c, y_c, delay_s)));
           },
           nb::arg("geometry"), nb::arg("parameters"), nb::arg("epsilon"),
-           nb::arg("mode_tolerance"), nb::arg("stop_tolerance"),
-           "Model((l, b, a, r, i_G), parameters[11], epsilon, mode_tolerance, stop_tolerance)")
+           nb::arg("mode_tolerance"), nb::arg("stop_tolerance"), nb::kw_only(), nb::arg("stribeck") = false,
+           nb::arg("d_s") = Triple{0.0, 0.0, 0.0}, nb::arg("w_s") = Triple{1.0, 1.0, 1.0}, nb::arg("com_offset") = false,
+           nb::arg("x_c") = 0.0, nb::arg("y_c") = 0.0, nb::arg("delay_s") = 0.0,
+           "Model((l, b, a, r, i_G), parameters[11], epsilon, mode_tolerance, stop_tolerance, *, stribeck, "
+           "d_s=(d_sl, d_sr, d_sw), w_s=(w_sl, w_sr, w_sw), com_offset, x_c, y_c, delay_s): ff::Extension")
       .def("feedforward", &feedforward, nb::arg("mode"), nb::arg("alpha"), nb::arg("s_dot"), nb::arg("s_ddot"),
            nb::arg("u"), nb::arg("q_dot"), nb::arg("q_ddot"),
            "Fill u (N, 4) (and q_dot, q_ddot (N, 9) when they have N rows); return (status, first failing row or -1).");
@@ -324,5 +364,6 @@ NB_MODULE(_core, m) {
       .def_prop_ro("event_count", [](const ff::PayloadTracker& self) { return self.event_count(); });
   m.def("status_name", [](int code) { return std::string(ff::to_string(static_cast<ff::Status>(code))); });
   m.def("read_parameter_file", &parameter_file, nb::arg("path"),
-        "The C++ reader of parameter files: {'parameters': {name: value}, 'platform': {...} or None}.");
+        "The C++ reader of parameter files: {'parameters': {name: value}, 'platform': {...} or None, "
+        "'model': {friction, delay_s, com_offset} or None, 'extra': {name: value} of the model's extensions}.");
 }

@@ -197,6 +197,37 @@ Parameters Parameters::paper() noexcept {
   return from_vector(p);
 }
 
+namespace {
+
+// Finite values, and Stribeck velocities > 0 when the model has breakaway friction.
+bool valid(const Extension& e) noexcept {
+  for (int g = 0; g < 3; ++g) {
+    if (!finite(e.d_s[g]) || !finite(e.w_s[g])) return false;
+    if (e.stribeck && !(e.w_s[g] > 0)) return false;
+  }
+  return finite(e.x_c) && finite(e.y_c) && finite(e.delay_s);
+}
+
+}  // namespace
+
+Status Model::create(const Geometry& g, const Parameters& parameters, const Extension& extension,
+                     const Settings& settings, Model* model) noexcept {
+  if (model == nullptr || !valid(extension)) return Status::invalid_model;
+  Model m;
+  const Status status = create(g, parameters, settings, &m);
+  if (status != Status::ok) return status;
+  m.extension_ = extension;
+  *model = m;
+  return Status::ok;
+}
+
+Status Model::with_extension(const Extension& extension, Model* out) const noexcept {
+  if (out == nullptr || !valid(extension)) return Status::invalid_model;
+  if (out != this) *out = *this;
+  out->extension_ = extension;
+  return Status::ok;
+}
+
 Status Model::create(const Geometry& g, const Parameters& parameters, const Settings& settings,
                      Model* model) noexcept {
   if (model == nullptr) return Status::invalid_model;
@@ -311,10 +342,38 @@ Vector9 Model::forces(const JointMotion& jm) const noexcept {
   f[0] = P.m_ch * (qdd[0] - qd[1] * qd[2]);
   f[1] = P.m_ch * (qdd[1] + qd[0] * qd[2]);
   f[2] = (P.C_l + P.C_r + P.C_ch) * qdd[2];
-  f[3] = P.C_l * qdd[3] + P.d_vl * qd[3] + P.d_cl * std::tanh(qd[3] / eps);
-  f[4] = P.C_r * qdd[4] + P.d_vr * qd[4] + P.d_cr * std::tanh(qd[4] / eps);
-  for (int i = 5; i < 9; ++i) f[i] = P.B_w * qdd[i] + P.d_vw * qd[i] + P.d_cw * std::tanh(qd[i] / eps);
+  double coulomb[9];  // tanh(q_dot / epsilon) of the joints 3..8, shared with the breakaway terms
+  for (int i = 3; i < 9; ++i) coulomb[i] = std::tanh(qd[i] / eps);
+  f[3] = P.C_l * qdd[3] + P.d_vl * qd[3] + P.d_cl * coulomb[3];
+  f[4] = P.C_r * qdd[4] + P.d_vr * qd[4] + P.d_cr * coulomb[4];
+  for (int i = 5; i < 9; ++i) f[i] = P.B_w * qdd[i] + P.d_vw * qd[i] + P.d_cw * coulomb[i];
+  if (extension_.changes_forces()) f += extension_forces(jm, coulomb);
   return f;
+}
+
+Vector9 Model::extension_forces(const JointMotion& jm, const double* coulomb) const noexcept {
+  // agvdyn.dynamics_extended: breakaway_forces, then com_offset_forces (the same order of operations)
+  const Vector9& qd = jm.q_dot;
+  const Vector9& qdd = jm.q_ddot;
+  const Extension& e = extension_;
+  Vector9 out = Vector9::Zero();
+  if (e.stribeck) {
+    const double d_c[3] = {parameters_.d_cl, parameters_.d_cr, parameters_.d_cw};
+    for (int i = 3; i < 9; ++i) {
+      const int g = i < 5 ? i - 3 : 2;
+      const double ratio = qd[i] / e.w_s[g];
+      out[i] = (e.d_s[g] - d_c[g]) * std::exp(-(ratio * ratio)) * coulomb[i];
+    }
+  }
+  if (e.com_offset) {
+    const double m_x_c = parameters_.m_ch * e.x_c, m_y_c = parameters_.m_ch * e.y_c;
+    const double w = qd[2], w_dot = qdd[2], w2 = w * w;
+    const double a_x = qdd[0] - qd[1] * w, a_y = qdd[1] + qd[0] * w;
+    out[0] += -m_x_c * w2 - m_y_c * w_dot;
+    out[1] += m_x_c * w_dot - m_y_c * w2;
+    out[2] += m_x_c * a_y - m_y_c * a_x;
+  }
+  return out;
 }
 
 void Model::motion(const Setpoint& sp, const Matrix92& H, const Matrix92& dH, JointMotion& jm) const noexcept {

@@ -2,7 +2,9 @@
 
 #include "document.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <vector>
 
 namespace agvdyn::ff {
@@ -69,6 +71,117 @@ bool geometry_of(const std::string& source, const std::string& prefix, const Nod
   return true;
 }
 
+bool flag(const std::string& source, const std::string& key, const Node& node, bool* out, std::string* error) {
+  const std::string& t = node.text;
+  if (node.kind == Node::Kind::scalar && !node.quoted && (t == "true" || t == "True" || t == "TRUE")) {
+    *out = true;
+  } else if (node.kind == Node::Kind::scalar && !node.quoted && (t == "false" || t == "False" || t == "FALSE")) {
+    *out = false;
+  } else {
+    return fail(error, source + ": " + key + "=" + describe(node) + ": expected true or false");
+  }
+  return true;
+}
+
+// The value of parameter `name` in the parameters table (`{value: ...}` or a number); false when missing.
+bool parameter_value(const std::string& source, const Node& table, const std::string& name, double* out,
+                     std::string* error) {
+  const Node& entry = *table.find(name);
+  if (entry.is_mapping()) {
+    const Node* value = entry.find("value");
+    if (value == nullptr) return fail(error, source + ": parameter " + name + " has no 'value'");
+    if (!number(source, name + ".value", *value, out, error)) return false;
+  } else if (!number(source, name, entry, out, error)) {
+    return false;
+  }
+  if (!std::isfinite(*out)) {
+    return fail(error, source + ": parameter " + name + "=" + std::to_string(*out) + ": expected a finite number");
+  }
+  return true;
+}
+
+// friction, delay (delay_s), com_offset and stribeck_velocities of the `model:` block (agvdyn.model_spec).
+bool model_block(const std::string& source, const Node& node, Extension* e, std::string* error) {
+  static const char* known[] = {"friction", "delay", "delay_s", "delay_std_s", "com_offset", "stribeck_velocities",
+                                "stribeck_range", "delay_range"};
+  if (!node.is_mapping()) {
+    return fail(error, source + ": model: expected a mapping with friction, delay, com_offset, found " + describe(node));
+  }
+  for (const std::string& key : node.keys) {
+    if (std::find(std::begin(known), std::end(known), key) == std::end(known)) {
+      return fail(error, source + ": model: unknown key " + key + ": expected some of [com_offset, delay, delay_range, "
+                         "delay_s, delay_std_s, friction, stribeck_range, stribeck_velocities]");
+    }
+  }
+  if (const Node* f = node.find("friction"); f != nullptr) {
+    if (f->kind != Node::Kind::scalar || (f->text != "paper" && f->text != "stribeck")) {
+      return fail(error, source + ": model.friction=" + describe(*f) + ": expected paper or stribeck");
+    }
+    e->stribeck = f->text == "stribeck";
+  }
+  for (const char* key : {"delay", "delay_s"}) {
+    const Node* d = node.find(key);
+    if (d == nullptr || d->is_null()) continue;
+    if (!d->number(&e->delay_s) || !std::isfinite(e->delay_s)) {
+      return fail(error, source + ": model." + key + "=" + describe(*d) + ": expected a number of seconds (a "
+                         "parameter file gives the delay found, not 'auto')");
+    }
+  }
+  if (const Node* c = node.find("com_offset"); c != nullptr && !flag(source, "model.com_offset", *c, &e->com_offset, error)) {
+    return false;
+  }
+  if (const Node* v = node.find("stribeck_velocities"); v != nullptr && !v->is_null()) {
+    if (!v->is_sequence() || v->values.size() != 3) {
+      return fail(error, source + ": model.stribeck_velocities=" + describe(*v) + ": expected [w_sl, w_sr, w_sw] in rad/s");
+    }
+    for (int g = 0; g < 3; ++g) {
+      if (!number(source, "model.stribeck_velocities", v->values[static_cast<std::size_t>(g)], &e->w_s[g], error)) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+// The extra parameters the model block asks for, from the parameters table; checked like Model::create.
+bool extension_of(const std::string& source, const Node& root, const Node& table, ParameterFile* out,
+                  std::string* error) {
+  const Node* block = root.find("model");
+  if (block == nullptr || block->is_null()) return true;
+  Extension e;
+  if (!model_block(source, *block, &e, error)) return false;
+  std::vector<std::string> needed, missing;
+  if (e.stribeck) needed.insert(needed.end(), {"d_sl", "d_sr", "d_sw"});
+  const bool listed = block->find("stribeck_velocities") != nullptr && !block->find("stribeck_velocities")->is_null();
+  if (e.stribeck && !listed) needed.insert(needed.end(), {"w_sl", "w_sr", "w_sw"});
+  if (e.com_offset) needed.insert(needed.end(), {"x_c", "y_c"});
+  for (const auto& name : needed) {
+    if (table.find(name) == nullptr) missing.push_back(name);
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (const auto& m : missing) list += (list.empty() ? "" : ", ") + m;
+    return fail(error, source + ": model " + (e.stribeck ? "friction stribeck" : "") +
+                           (e.stribeck && e.com_offset ? ", " : "") + (e.com_offset ? "com_offset" : "") +
+                           ": missing parameters [" + list + "]");
+  }
+  double* slots[8] = {&e.d_s[0], &e.d_s[1], &e.d_s[2], &e.w_s[0], &e.w_s[1], &e.w_s[2], &e.x_c, &e.y_c};
+  for (int k = 0; k < 8; ++k) {  // the table's w_s before the block's stribeck_velocities
+    const std::string name = Extension::names[static_cast<std::size_t>(k)];
+    const bool wanted = k < 6 ? e.stribeck : e.com_offset;
+    if (wanted && table.find(name) != nullptr && !parameter_value(source, table, name, slots[k], error)) return false;
+  }
+  for (int g = 0; g < 3 && e.stribeck; ++g) {
+    if (!(e.w_s[g] > 0)) {
+      return fail(error, source + ": parameter " + std::string(Extension::names[3 + g]) + "=" +
+                             std::to_string(e.w_s[g]) + ": expected a Stribeck velocity > 0 rad/s");
+    }
+  }
+  out->has_model = true;
+  out->extension = e;
+  return true;
+}
+
 bool parameters_of(const std::string& source, const Node& root, ParameterFile* out, std::string* error) {
   if (!root.is_mapping()) return fail(error, source + ": expected a mapping at the top level, found " + describe(root));
   const Node* table = root.find("parameters");
@@ -84,21 +197,11 @@ bool parameters_of(const std::string& source, const Node& root, ParameterFile* o
   }
   Vector11 p;
   for (int k = 0; k < 11; ++k) {
-    const std::string name = Parameters::names[k];
-    const Node& entry = *table->find(name);
-    if (entry.is_mapping()) {
-      const Node* value = entry.find("value");
-      if (value == nullptr) return fail(error, source + ": parameter " + name + " has no 'value'");
-      if (!number(source, name + ".value", *value, &p[k], error)) return false;
-    } else if (!number(source, name, entry, &p[k], error)) {
-      return false;
-    }
-    if (!std::isfinite(p[k])) {
-      return fail(error, source + ": parameter " + name + "=" + std::to_string(p[k]) + ": expected a finite number");
-    }
+    if (!parameter_value(source, *table, Parameters::names[k], &p[k], error)) return false;
   }
   ParameterFile result;
   result.parameters = Parameters::from_vector(p);
+  if (!extension_of(source, root, *table, &result, error)) return false;
   const Node* platform = root.find("platform");
   if (platform != nullptr && !platform->is_null()) {
     if (!geometry_of(source, "platform.", *platform, &result.platform, &result.platform_name, error)) return false;

@@ -2,7 +2,10 @@
 
 Writes ``cpp/tests/vectors.json``: random configurations and desired motions per motion mode on
 three vehicles, with the joint motion (eq. 4, 20) and the motor torques of eq. (21) that
-``agvdyn.dynamics.feedforward_torques`` computes, plus invalid inputs and the error each must give.
+``agvdyn.dynamics.feedforward_torques`` computes, plus invalid inputs and the error each must give;
+and the same for models beyond the paper (issue 30, ``extended_models``, ``extended_cases``:
+Stribeck friction per joint group, an off-centre centre of mass, a delay) from their own random
+stream, so that the paper's vectors stay as they were.
 The C++ tests (``ff_tests``, ctest) and the pytest suite (``tests/test_cpp_feedforward.py``) both
 read this file. Regenerate after a change of the Python model::
 
@@ -32,6 +35,7 @@ from agvdyn.kinematics import (
     nominal_steering,
     steering_from_virtual,
 )
+from agvdyn.model_spec import ModelParameters, ModelSpec
 from agvdyn.platform import EPSILON, PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE, Geometry, Parameters
 
 PATH = Path(__file__).with_name("vectors.json")
@@ -145,7 +149,67 @@ def invalid_cases(models) -> list[dict[str, Any]]:
     return out
 
 
+#: Models beyond the paper: (vehicle index, spec, breakaway ratio d_s/d_c per group, w_s per group,
+#: (x_c, y_c), delay_s). A ratio below 1 (d_s < d_c) is data the identification may find.
+EXTENDED = (
+    (0, ModelSpec(friction="stribeck"), (1.3, 1.5, 1.2), (0.05, 0.1, 0.02), None, 0.0),
+    (0, ModelSpec(com_offset=True), None, None, (0.15, -0.1), 0.0),
+    (1, ModelSpec(friction="stribeck", delay=0.006, com_offset=True), (1.4, 1.25, 1.3), (0.03, 0.08, 0.05),
+     (-0.12, 0.2), 0.006),
+    (2, ModelSpec(friction="stribeck", com_offset=True), (0.8, 1.1, 1.5), (0.2, 0.01, 0.1), (0.05, 0.04), 0.0),
+)
+
+
+def extended_models(models) -> list[tuple[int, ModelParameters]]:
+    """The models of :data:`EXTENDED` on the vehicles ``models`` (their geometry and 11 parameters)."""
+    out = []
+    for index, spec, ratio, w_s, centre, delay in EXTENDED:
+        p = models[index][2]
+        extra = {}
+        if spec.stribeck:
+            for g, d_c, k, w in zip("lrw", (p.d_cl, p.d_cr, p.d_cw), ratio, w_s):
+                extra[f"d_s{g}"], extra[f"w_s{g}"] = k * d_c, w
+        if spec.com_offset:
+            extra["x_c"], extra["y_c"] = centre
+        out.append((index, ModelParameters(p, extra, delay, spec)))
+    return out
+
+
+def extended_cases(models, extended, rng) -> list[dict[str, Any]]:
+    """Cases of every mode on each extended model; joint rates down to 1 % of the usual, through
+    the Stribeck range."""
+    cases = []
+    for index, (vehicle, model) in enumerate(extended):
+        geom = models[vehicle][1]
+        for mode in Mode:
+            alpha = configurations(geom, mode, CASES_PER_MODE, rng)
+            s_dot, s_ddot = motions(mode, CASES_PER_MODE, rng)
+            s_dot *= 10.0 ** rng.uniform(-2.0, 0.0, (CASES_PER_MODE, 1))
+            u = feedforward_torques(geom, model, mode, alpha, s_dot, s_ddot)
+            q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot)
+            for j in range(CASES_PER_MODE):
+                cases.append({"model": index, "mode": mode.label, "alpha": _floats(alpha[j]),
+                              "s_dot": _floats(s_dot[j]), "s_ddot": _floats(s_ddot[j]),
+                              "q_dot": _floats(q_dot[j]), "q_ddot": _floats(q_ddot[j]), "u": _floats(u[j])})
+    return cases
+
+
+def _extended_entry(vehicle: int, model: ModelParameters) -> dict[str, Any]:
+    return {"vehicle": vehicle, "model": {"friction": model.spec.friction, "delay_s": model.delay_s,
+                                          "com_offset": model.spec.com_offset}, "extra": dict(model.extra)}
+
+
 def vectors() -> dict[str, Any]:
+    data = paper_vectors()
+    rng = np.random.default_rng(SEED + 30)  # issue 30: a stream of its own
+    models = vehicles(np.random.default_rng(SEED))
+    extended = extended_models(models)
+    data["extended_models"] = [_extended_entry(vehicle, model) for vehicle, model in extended]
+    data["extended_cases"] = extended_cases(models, extended, rng)
+    return data
+
+
+def paper_vectors() -> dict[str, Any]:
     rng = np.random.default_rng(SEED)
     models = vehicles(rng)
     return {
@@ -233,8 +297,8 @@ def tracker_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], f
 
 def _synthetic_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Log 1: rows of the tracker's own model z = phi_m m + phi_C C + b_kind + AR(1) noise, in runs of
-    every kind, with a drop of 300 kg at the second x_ch+ run and +40 kg m^2 of C_ch at the second
-    gamma_ch+ run (negative signs, C_ch detection, every bias and noise class)."""
+    every kind, with a drop of 300 kg at the second x_ch+ run and +40 kg m^2 of C_ch in the middle of
+    the second gamma_ch+ run (negative signs, C_ch detection, every bias and noise class)."""
     runs = [(1, 400), (5, 2500), (2, 300), (3, 200), (6, 300), (1, 500), (5, 800), (4, 300)]
     kind = np.concatenate([np.full(n, k) for k, n in runs]).astype(np.int64)
     n = kind.size
@@ -246,7 +310,7 @@ def _synthetic_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, n
     phi[:, 1] = np.where(coord == 3, 1.0 * wave, np.where(coord == 1, 0.05 * np.cos(2 * np.pi * i / 400.0), 0.0))
     starts = np.cumsum([0] + [r[1] for r in runs])
     m = np.where(i >= starts[5], 842.0684, 1142.0684)
-    C = np.where(i >= starts[6], 326.6, 286.6)
+    C = np.where(i >= starts[6] + 400, 326.6, 286.6)  # mid-run: after the drop's reset, C_ch is relearnt first
     bias = np.array([0.0, 3.0, -2.0, 1.5, -1.0, 0.8, -0.5])[kind]
     e = rng.normal(0.0, 0.6, n)
     noise = np.zeros(n)

@@ -326,3 +326,127 @@ TEST_F(Fixture, GeneralizedVelocitiesInvertTheKinematicModel) {
     }
   }
 }
+
+// --- the model beyond the paper (issue 30): Stribeck friction per joint group, off-centre chassis ------
+namespace {
+
+// The extension's forces written out from agvdyn.model_spec (independently of the library's code).
+ff::Vector9 extended_forces(const ff::Parameters& P, const ff::Extension& e, const ff::JointMotion& jm, double eps) {
+  ff::Vector9 f = forces(P, jm, eps);
+  const ff::Vector9& qd = jm.q_dot;
+  const ff::Vector9& qdd = jm.q_ddot;
+  if (e.stribeck) {
+    const double d_c[3] = {P.d_cl, P.d_cr, P.d_cw};
+    for (int i = 3; i < 9; ++i) {
+      const int g = i == 3 ? 0 : i == 4 ? 1 : 2;
+      f[i] += (e.d_s[g] - d_c[g]) * std::exp(-std::pow(qd[i] / e.w_s[g], 2)) * std::tanh(qd[i] / eps);
+    }
+  }
+  if (e.com_offset) {
+    // Newton-Euler about the reference point: the centre of mass accelerates with
+    // a + w_dot z x r_c - w^2 r_c; the moment of m a_com about the reference point adds r_c x m a_com
+    const double w = qd[2], w_dot = qdd[2];
+    const double ax = qdd[0] - qd[1] * w, ay = qdd[1] + qd[0] * w;
+    const double acx = ax - w_dot * e.y_c - w * w * e.x_c, acy = ay + w_dot * e.x_c - w * w * e.y_c;
+    f[0] = P.m_ch * acx;
+    f[1] = P.m_ch * acy;
+    // C_ch is about the reference point: C_com = C_ch - m |r_c|^2
+    const double c_com = P.C_ch - P.m_ch * (e.x_c * e.x_c + e.y_c * e.y_c);
+    f[2] = (c_com + P.C_l + P.C_r) * w_dot + P.m_ch * (e.x_c * acy - e.y_c * acx);
+  }
+  return f;
+}
+
+ff::Extension breakaway_and_offset() {
+  ff::Extension e;
+  e.stribeck = true;
+  e.d_s = {17.0, 21.0, 5.1};
+  e.w_s = {0.05, 0.1, 0.02};
+  e.com_offset = true;
+  e.x_c = 0.15;
+  e.y_c = -0.1;
+  e.delay_s = 0.006;
+  return e;
+}
+
+}  // namespace
+
+TEST_F(Fixture, ExtendedModelHasNoNetForceOnAnyAdmissibleDirection) {
+  ff::Model extended;
+  const ff::Extension e = breakaway_and_offset();
+  ASSERT_EQ(model.with_extension(e, &extended), ff::Status::ok);
+  for (ff::Mode mode : {ff::Mode::parking, ff::Mode::car_like, ff::Mode::rotation, ff::Mode::straight}) {
+    double changed = 0;
+    for (int trial = 0; trial < 30; ++trial) {
+      ff::Setpoint sp = random(mode);
+      sp.s_dot *= std::pow(10.0, -2.0 * std::abs(unit(rng)));  // through the Stribeck range
+      ff::Vector4 u, u_paper;
+      ff::JointMotion jm;
+      ASSERT_EQ(extended.feedforward(sp, u, &jm), ff::Status::ok);
+      ASSERT_EQ(model.feedforward(sp, u_paper), ff::Status::ok);
+      const Eigen::MatrixXd N = Eigen::FullPivLU<Eigen::MatrixXd>(constraint_matrix(g, sp.alpha)).kernel();
+      const ff::Vector9 f = extended_forces(p, e, jm, 0.01);
+      const Eigen::VectorXd net = N.transpose() * (input(g, u) - f);
+      EXPECT_LT(net.cwiseAbs().maxCoeff(), 1e-9 * (1 + (N.transpose() * f).cwiseAbs().maxCoeff()))
+          << "mode " << ff::label(mode);
+      changed = std::max(changed, (u - u_paper).cwiseAbs().maxCoeff() / (1e-3 + u_paper.cwiseAbs().maxCoeff()));
+    }
+    // pure rotation about the reference point and straight motion: the wheels' lateral constraint
+    // forces take the offset's chassis forces; only the wheels' breakaway below w_sw is left
+    if (mode == ff::Mode::parking || mode == ff::Mode::car_like) EXPECT_GT(changed, 1e-3) << "mode " << ff::label(mode);
+  }
+}
+
+TEST_F(Fixture, EqualBreakawayAndCoulombLevelsAndNoOffsetAreThePaperModel) {
+  ff::Extension e;
+  e.stribeck = true;
+  e.d_s = {p.d_cl, p.d_cr, p.d_cw};
+  e.w_s = {0.05, 0.01, 0.3};
+  e.com_offset = true;  // at the reference point
+  ff::Model extended;
+  ASSERT_EQ(ff::Model::create(g, p, e, ff::Settings{}, &extended), ff::Status::ok);
+  for (ff::Mode mode : kModes) {
+    for (int trial = 0; trial < 20; ++trial) {
+      ff::Setpoint sp = random(mode);
+      sp.s_dot *= std::pow(10.0, -2.0 * std::abs(unit(rng)));
+      ff::Vector4 u, u_paper;
+      ASSERT_EQ(extended.feedforward(sp, u), ff::Status::ok);
+      ASSERT_EQ(model.feedforward(sp, u_paper), ff::Status::ok);
+      EXPECT_TRUE(u == u_paper) << "mode " << ff::label(mode) << ": " << (u - u_paper).transpose();
+    }
+  }
+}
+
+TEST_F(Fixture, ExtendedModelDoesNotAllocateAndKeepsItsExtension) {
+  ff::Model extended;
+  ASSERT_EQ(model.with_extension(breakaway_and_offset(), &extended), ff::Status::ok);
+  ff::Parameters heavier = p;
+  heavier.m_ch += 300;
+  ASSERT_EQ(extended.with_parameters(heavier, &extended), ff::Status::ok);
+  EXPECT_TRUE(extended.extension().stribeck && extended.extension().com_offset);
+  EXPECT_DOUBLE_EQ(extended.extension().delay_s, 0.006);
+  ff::Setpoint inputs[5];
+  for (int k = 0; k < 5; ++k) inputs[k] = random(kModes[k]);
+  ff::Vector4 u;
+  ff::JointMotion jm;
+  const long before = g_allocations.load();
+  for (int rep = 0; rep < 100; ++rep) {
+    for (const ff::Setpoint& sp : inputs) (void)extended.feedforward(sp, u, &jm);
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
+}
+
+TEST(Model, RefusesAnExtensionThatBreaksItsInvariants) {
+  ff::Model m;
+  const ff::Parameters p = ff::Parameters::paper();
+  ff::Extension e;
+  e.stribeck = true;
+  e.w_s = {0.05, 0.0, 0.1};
+  EXPECT_EQ(ff::Model::create(ff::Geometry{}, p, e, ff::Settings{}, &m), ff::Status::invalid_model);
+  e.stribeck = false;  // w_s unused without breakaway friction
+  EXPECT_EQ(ff::Model::create(ff::Geometry{}, p, e, ff::Settings{}, &m), ff::Status::ok);
+  e.x_c = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(ff::Model::create(ff::Geometry{}, p, e, ff::Settings{}, &m), ff::Status::invalid_model);
+  EXPECT_EQ(m.with_extension(e, &m), ff::Status::invalid_model);
+  EXPECT_FALSE(m.extension().stribeck);  // untouched
+}

@@ -186,3 +186,103 @@ TEST(PlatformFile, ReadsAPlatformFile) {
   EXPECT_EQ(name, "small");
   EXPECT_DOUBLE_EQ(g.r, 0.09);
 }
+
+// --- the model beyond the paper (issue 30): the `model:` block and the extra parameters --------------
+namespace {
+
+const char* kExtendedYaml = R"(parameters:
+  C_l: {value: 0.3342}
+  d_vl: {value: 4.4649}
+  d_cl: {value: 12.9458}
+  C_r: {value: 0.4501}
+  d_vr: {value: 2.482}
+  d_cr: {value: 17.1071}
+  m_ch: {value: 842.0684}
+  C_ch: {value: 286.5955}
+  d_vw: {value: 0.7316}
+  d_cw: {value: 3.9656}
+  B_w: {value: 0.121, fixed: true}
+  d_sl: {value: 16.8, std: 0.3, unit: N m}
+  d_sr: {value: 22.2, std: .inf, unit: N m}
+  d_sw: {value: 5.1, std: 0.05, unit: N m}
+  w_sl: {value: 0.05, unit: rad/s}
+  w_sr: {value: 0.1, unit: rad/s}
+  w_sw: {value: 0.02, unit: rad/s}
+  x_c: {value: 0.15, std: 0.004, unit: m}
+  y_c:
+    value: -0.1
+    std: 0.004
+    unit: m
+model:
+  friction: stribeck
+  delay: 0.006
+  com_offset: true
+)";
+
+bool parse_extended(const std::string& text, ff::ParameterFile* file, std::string* error) {
+  return ff::parse_parameter_file(text, "p.yaml", file, error);
+}
+
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return text.replace(at, from.size(), to);
+}
+
+}  // namespace
+
+TEST(ParameterFile, ReadsAModelBlockAndItsExtraParameters) {
+  ff::ParameterFile file;
+  std::string error;
+  ASSERT_TRUE(parse_extended(kExtendedYaml, &file, &error)) << error;
+  expect_paper(file.parameters);
+  ASSERT_TRUE(file.has_model);
+  const ff::Extension& e = file.extension;
+  EXPECT_TRUE(e.stribeck && e.com_offset);
+  EXPECT_DOUBLE_EQ(e.delay_s, 0.006);
+  EXPECT_DOUBLE_EQ(e.d_s[0], 16.8);
+  EXPECT_DOUBLE_EQ(e.d_s[2], 5.1);
+  EXPECT_DOUBLE_EQ(e.w_s[1], 0.1);
+  EXPECT_DOUBLE_EQ(e.x_c, 0.15);
+  EXPECT_DOUBLE_EQ(e.y_c, -0.1);
+  // the paper's model: no block, or a block without extensions; extras are then not read
+  ASSERT_TRUE(parse_extended(kIdentifyYaml, &file, &error)) << error;
+  EXPECT_FALSE(file.has_model);
+  EXPECT_FALSE(file.extension.changes_forces());
+  ASSERT_TRUE(parse_extended(replaced(replaced(kExtendedYaml, "stribeck\n", "paper\n"), "com_offset: true",
+                                      "com_offset: false"), &file, &error)) << error;
+  EXPECT_TRUE(file.has_model);
+  EXPECT_FALSE(file.extension.changes_forces());
+  // JSON and the block's stribeck_velocities (what ModelSpec.to_dict writes), delay_s as in --json
+  const std::string json = R"({"parameters": {"C_l": 0.3342, "d_vl": 4.4649, "d_cl": 12.9458, "C_r": 0.4501,
+    "d_vr": 2.482, "d_cr": 17.1071, "m_ch": 842.0684, "C_ch": 286.5955, "d_vw": 0.7316, "d_cw": 3.9656,
+    "B_w": 0.121, "d_sl": {"value": 16.8}, "d_sr": {"value": 22.2}, "d_sw": {"value": 5.1}},
+    "model": {"friction": "stribeck", "delay_s": -0.002, "delay_std_s": null, "com_offset": false,
+              "stribeck_velocities": [0.05, 0.1, 0.02], "stribeck_range": [0.005, 0.5]}})";
+  ASSERT_TRUE(ff::parse_parameter_file(json, "p.json", &file, &error)) << error;
+  EXPECT_TRUE(file.extension.stribeck && !file.extension.com_offset);
+  EXPECT_DOUBLE_EQ(file.extension.w_s[2], 0.02);
+  EXPECT_DOUBLE_EQ(file.extension.delay_s, -0.002);
+}
+
+TEST(ParameterFile, ModelBlockErrorsNameTheFileAndTheKey) {
+  ff::ParameterFile file;
+  std::string error;
+  const std::string text = kExtendedYaml;
+  EXPECT_FALSE(parse_extended(replaced(text, "  x_c: {value: 0.15, std: 0.004, unit: m}\n", ""), &file, &error));
+  EXPECT_EQ(error, "p.yaml: model friction stribeck, com_offset: missing parameters [x_c]");
+  EXPECT_FALSE(parse_extended(replaced(text, "friction: stribeck", "friction: coulomb"), &file, &error));
+  EXPECT_EQ(error, "p.yaml: model.friction=coulomb: expected paper or stribeck");
+  EXPECT_FALSE(parse_extended(replaced(text, "delay: 0.006", "delay: auto"), &file, &error));
+  EXPECT_NE(error.find("p.yaml: model.delay=auto: expected a number of seconds"), std::string::npos) << error;
+  EXPECT_FALSE(parse_extended(replaced(text, "com_offset: true", "com_offset: yes"), &file, &error));
+  EXPECT_EQ(error, "p.yaml: model.com_offset=yes: expected true or false");
+  EXPECT_FALSE(parse_extended(replaced(text, "delay: 0.006", "lag: 0.006"), &file, &error));
+  EXPECT_NE(error.find("p.yaml: model: unknown key lag"), std::string::npos) << error;
+  EXPECT_FALSE(parse_extended(replaced(text, "w_sr: {value: 0.1", "w_sr: {value: 0.0"), &file, &error));
+  EXPECT_EQ(error, "p.yaml: parameter w_sr=0.000000: expected a Stribeck velocity > 0 rad/s");
+  EXPECT_FALSE(parse_extended(replaced(text, "d_sw: {value: 5.1", "d_sw: {value: .nan"), &file, &error));
+  EXPECT_NE(error.find("p.yaml: parameter d_sw="), std::string::npos) << error;
+  EXPECT_FALSE(parse_extended(text + "  extra: 1\n", &file, &error));
+  EXPECT_NE(error.find("unknown key extra"), std::string::npos) << error;
+}

@@ -26,6 +26,8 @@ from agvdyn.kinematics import (
 from agvdyn.kinematics.constraints import _rows
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.kinematics import constraints, models
+from agvdyn.dynamics_extended import extension_forces
+from agvdyn.model_spec import ModelParameters
 from agvdyn.platform import EPSILON, PARAMETER_NAMES, Geometry, Parameters
 
 drop_stale_cache(__file__, constraints.__file__, models.__file__)  # compiled callees in those files
@@ -215,9 +217,12 @@ def projected_input(geom: Geometry, mode, alpha, u, *, tolerance: float = MODE_T
     return geom.i_G * np.einsum("nik,ni->nk", H[:, 5:, :], u)
 
 
-def generalized_forces(q_dot, q_ddot, params: Parameters, epsilon: float = EPSILON) -> np.ndarray:
+def generalized_forces(q_dot, q_ddot, params: Parameters | ModelParameters, epsilon: float = EPSILON) -> np.ndarray:
     """Model forces Theta(q, q_dot, q_ddot) p ``(N, 9)`` of eq. (15)-(16), from the nonzero entries
-    of Theta (:func:`regressor`) without forming it."""
+    of Theta (:func:`regressor`) without forming it; those of :func:`generalized_forces_model` when
+    ``params`` is a :class:`~agvdyn.model_spec.ModelParameters`."""
+    if isinstance(params, ModelParameters):
+        return generalized_forces_model(q_dot, q_ddot, params, epsilon)
     qd, qdd = _motion(q_dot, q_ddot)
     p = params.to_vector()
     f = np.empty((qd.shape[0], N_Q))
@@ -230,7 +235,18 @@ def generalized_forces(q_dot, q_ddot, params: Parameters, epsilon: float = EPSIL
     return f
 
 
-def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, s_ddot, *,
+def generalized_forces_model(q_dot, q_ddot, model: ModelParameters, epsilon: float = EPSILON) -> np.ndarray:
+    """Forces Theta p ``(N, 9)`` of a possibly extended model (:mod:`agvdyn.model_spec`): eq. (15)-(16)
+    with the Stribeck friction per joint group and the off-centre chassis rows when the model has them
+    (:func:`agvdyn.dynamics_extended.extension_forces`); the paper's :func:`generalized_forces` of
+    ``model.parameters``, bit for bit, when it has neither. The delay does not enter the forces."""
+    f = generalized_forces(q_dot, q_ddot, model.parameters, epsilon)
+    if model.spec.stribeck or model.spec.com_offset:
+        f += extension_forces(q_dot, q_ddot, model, epsilon)
+    return f
+
+
+def feedforward_torques(geom: Geometry, params: Parameters | ModelParameters, mode, alpha, s_dot, s_ddot, *,
                         epsilon: float = EPSILON, tolerance: float = MODE_TOLERANCE,
                         motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Motor torques u ``(N, 4)`` of the feed-forward law, eq. (21), for a desired motion in mode k.
@@ -250,6 +266,13 @@ def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, 
     steering is pressed into its stop, never pulled off).
 
     ``motion``: ``(q_dot, q_ddot)`` of the same motion when already computed (eq. 4 and 20).
+
+    ``params`` a :class:`~agvdyn.model_spec.ModelParameters`: the forces of the extended model
+    (:func:`generalized_forces_model`), distributed the same way. Its torque delay ``delay_s`` does
+    not change the torques, only when the logged column shows them: the torque logged at t acted at
+    ``t - delay_s``. Where the logged column is the drive's command, the torque that must act at t is
+    therefore to be commanded at ``t + delay_s`` (a command column leads the motion: ``delay_s < 0``,
+    command ``-delay_s`` early); a positive ``delay_s`` is a lag of the measurement, not of the drive.
     """
     mode = Mode.from_label(mode)
     alpha = as_alpha(alpha)

@@ -12,6 +12,16 @@ i.e. normalised by the RMS of the measured signal, not by its range: 0 is a perf
 prediction, 1 is as good as predicting zero. It is reported over all rows of the runs
 ("with stiction rows", as the paper's Fig. 6) and over the rows whose generalized velocity
 is above the stiction threshold ("without stiction rows").
+
+A model beyond the paper (issue 30, :class:`agvdyn.model_spec.ModelParameters`, or a parameter file
+with a ``model:`` block, :func:`agvdyn.model_file.read_model_parameters`) predicts with its
+extensions through the same rows as its identification (:mod:`agvdyn.identification.model_rows`):
+Stribeck friction per joint group and the off-centre chassis as the extra columns of each block;
+a torque delay ``delay_s`` by reading the *measured* torques at ``t + delay_s`` (the torque logged
+at t acted at ``t - delay_s``), so that measured and predicted torques belong to the same motion;
+the prediction is never shifted. The paper model's and an extended model's NRMSE on one log are
+therefore comparable: both are normalised by the RMS of the measured torques they are compared with
+(with a delay, the same samples shifted).
 """
 from __future__ import annotations
 
@@ -25,8 +35,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from agvdyn.identification import EquationBlock, IdentificationSettings, load_logs, log_equations, platform_for
-from agvdyn.platform import Geometry, ParameterFile, Parameters, read_parameters
+from agvdyn.identification import (EquationBlock, IdentificationSettings, load_logs, log_equations, log_rows,
+                                   platform_for)
+from agvdyn.identification.model_fit import linear_values
+from agvdyn.model_file import read_model_parameters
+from agvdyn.model_spec import STRIBECK_NAMES, ModelParameters, ModelSpec
+from agvdyn.platform import Geometry, ParameterFile, Parameters
 
 __all__ = ["Validation", "validate", "nrmse"]
 
@@ -49,10 +63,13 @@ class Validation:
 
     Attributes
     ----------
-    parameters : the parameters validated.
-    blocks : equation blocks of the validation log (measured torques, regressor, stiction mask).
+    parameters : the parameters validated (the paper's 11).
+    blocks : equation blocks of the validation log (measured torques, regressor, stiction mask; the
+        extensions' columns and delayed torques of an extended model).
     table : per ``"segment:coordinate"``: ``nrmse`` (all rows), ``nrmse_moving`` (stiction rows
         left out), ``rms_error``, ``rms_measured``, ``n_rows``, ``n_moving``.
+    model : the model validated (:class:`~agvdyn.model_spec.ModelParameters`; the paper's model of
+        ``parameters`` when not given).
     """
 
     parameters: Parameters
@@ -62,6 +79,16 @@ class Validation:
     geometry: Geometry
     source: str = ""
     notes: tuple[str, ...] = ()
+    model: ModelParameters | None = None
+
+    def __post_init__(self) -> None:
+        if self.model is None:
+            object.__setattr__(self, "model", ModelParameters(self.parameters))
+
+    @property
+    def extra_vector(self) -> np.ndarray | None:
+        """Values of the extensions' columns of the blocks (``model.spec.linear_names``), None without."""
+        return linear_values(self.model.spec, self.model.extra, self.parameters)
 
     @property
     def nrmse(self) -> dict[str, float]:
@@ -78,10 +105,10 @@ class Validation:
 
     def torques_frame(self) -> pd.DataFrame:
         """Measured and predicted generalized torques per row (long format, Fig. 6)."""
-        p = self.parameters.to_vector()
+        p, x = self.parameters.to_vector(), self.extra_vector
         frames = []
         for b in self.blocks:
-            model = b.model_torque(p)
+            model = b.model_torque(p, extra=x)
             for j, coord in enumerate(b.coordinates):
                 frames.append(pd.DataFrame({
                     "source": b.source, "segment": b.segment, "mode": b.mode.label, "coordinate": coord,
@@ -100,21 +127,31 @@ class Validation:
             "rows": {k: int(v) for k, v in self.table["n_rows"].items()},
             "filtering": self.settings.rows.filtering.value,
             "notes": list(self.notes),
+            "model": {"friction": self.model.spec.friction, "delay_s": self.model.delay_s,
+                      "com_offset": self.model.spec.com_offset},
         }
 
 
-def _as_parameters(params: Parameters | ParameterFile | str | os.PathLike) -> Parameters:
-    if isinstance(params, Parameters):
+def _as_model(params: Parameters | ModelParameters | ParameterFile | str | os.PathLike) -> ModelParameters:
+    if isinstance(params, ModelParameters):
         return params
+    if isinstance(params, Parameters):
+        return ModelParameters(params)
     if isinstance(params, ParameterFile):
-        return params.parameters
-    return read_parameters(params).parameters
+        return ModelParameters(params.parameters)
+    return read_model_parameters(params)
 
 
-def _table(blocks: Sequence[EquationBlock], p: np.ndarray) -> pd.DataFrame:
+def _row_model(model: ModelParameters) -> ModelSpec:
+    """The resolved spec of the model's rows: its delay in seconds, its Stribeck velocities."""
+    velocities = tuple(model.value(n) for n in STRIBECK_NAMES) if model.spec.stribeck else None
+    return model.spec.replace(delay=model.delay_s, stribeck_velocities=velocities)
+
+
+def _table(blocks: Sequence[EquationBlock], p: np.ndarray, x: np.ndarray | None = None) -> pd.DataFrame:
     pooled: dict[str, list[list[np.ndarray]]] = {}
     for b in blocks:
-        model = b.model_torque(p)
+        model = b.model_torque(p, extra=x)
         for j, coord in enumerate(b.coordinates):
             entry = pooled.setdefault(f"{b.segment}:{coord}", [[], [], []])
             entry[0].append(b.torque[:, j])
@@ -135,7 +172,7 @@ def _table(blocks: Sequence[EquationBlock], p: np.ndarray) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("coordinate")
 
 
-def validate(log: Any, params: Parameters | ParameterFile | str | os.PathLike,
+def validate(log: Any, params: Parameters | ModelParameters | ParameterFile | str | os.PathLike,
              platform: Geometry | str | os.PathLike | None = None, *,
              settings: IdentificationSettings = IdentificationSettings()) -> Validation:
     """Predict the generalized torques of an unseen log and compare with the measured ones (Fig. 6).
@@ -143,7 +180,9 @@ def validate(log: Any, params: Parameters | ParameterFile | str | os.PathLike,
     Parameters
     ----------
     log : path or :class:`agvdyn.io.Log` (typically the lane change in mode 2).
-    params : identified parameters (Parameters, ParameterFile or parameter file path).
+    params : identified parameters (Parameters, ParameterFile or parameter file path: the paper's
+        model) or model (ModelParameters, or a parameter file path with a ``model:`` block: the
+        model beyond the paper, see the module docstring).
     platform : Geometry or platform file; default the log sidecar's platform, else the prototype.
     settings : the same signal settings as the identification (filter, filtering, stiction).
 
@@ -153,15 +192,22 @@ def validate(log: Any, params: Parameters | ParameterFile | str | os.PathLike,
         NRMSE per generalized coordinate with and without the stiction rows.
     """
     (log,) = load_logs([log])
-    parameters = _as_parameters(params)
+    model = _as_model(params)
+    parameters = model.parameters
     geometry = platform_for([log], platform)
-    blocks, notes = log_equations(log, geometry, settings)
+    spec = _row_model(model)
+    if spec.is_paper:
+        blocks, notes = log_equations(log, geometry, settings)
+    else:
+        rows = log_rows(log, geometry, settings, model=spec)
+        blocks, notes = list(rows.blocks), list(rows.notes)
     if not blocks:
         raise ValueError(f"{getattr(log, 'path', None) or '<log>'}: no row in a motion mode to validate on "
                          "(the chassis moves with steering angles of no mode of eq. 9, or stands still)")
-    table = _table(blocks, parameters.to_vector())
+    x = linear_values(model.spec, model.extra, parameters)
+    table = _table(blocks, parameters.to_vector(), x)
     return Validation(parameters, tuple(blocks), table, settings, geometry,
-                      str(getattr(log, "path", None) or "<log>"), tuple(notes))
+                      str(getattr(log, "path", None) or "<log>"), tuple(notes), model)
 
 
 def write_validation(path: str | os.PathLike, validation: Validation) -> Path:

@@ -83,6 +83,30 @@ struct Parameters {
   static Parameters paper() noexcept;
 };
 
+/// The model beyond the paper (issue 30; agvdyn.model_spec.ModelParameters), default the paper's model:
+///  * stribeck: per joint group g (0 left steering, 1 right steering, 2 wheels) the friction of a joint
+///    rate w is d_v w + [d_c + (d_s - d_c) exp(-(w / w_s)^2)] tanh(w / epsilon), with d_s the static
+///    (breakaway) level d_sl, d_sr, d_sw (N m) and w_s the Stribeck velocity w_sl, w_sr, w_sw (rad/s, > 0);
+///  * com_offset: the chassis centre of mass at (x_c, y_c) in the chassis frame (m); with a_x, a_y of
+///    eq. (16), w = gamma_dot, m = m_ch the chassis rows gain -m x_c w^2 - m y_c w_dot,
+///    m x_c w_dot - m y_c w^2 and m x_c a_y - m y_c a_x (C_ch stays about the reference point);
+///  * delay_s: the logged torque column lags the angles by delay_s (the torque logged at t acted at
+///    t - delay_s). It is carried, not applied: it does not change the torques, only when they must be
+///    commanded (a command column that leads, delay_s < 0, is issued -delay_s early; docs/cpp.md).
+struct Extension {
+  bool stribeck = false;
+  std::array<double, 3> d_s{{0.0, 0.0, 0.0}};   ///< d_sl, d_sr, d_sw (N m)
+  std::array<double, 3> w_s{{1.0, 1.0, 1.0}};   ///< w_sl, w_sr, w_sw (rad/s)
+  bool com_offset = false;
+  double x_c = 0.0, y_c = 0.0;                  ///< m
+  double delay_s = 0.0;                         ///< s
+
+  /// Names of the extra parameters in parameter files (agvdyn.model_spec.EXTRA_NAMES).
+  static constexpr std::array<const char*, 8> names = {"d_sl", "d_sr", "d_sw", "w_sl", "w_sr", "w_sw", "x_c", "y_c"};
+  /// Breakaway friction or an offset: forces beyond those of eq. (16).
+  bool changes_forces() const noexcept { return stribeck || com_offset; }
+};
+
 /// Tuning constants, defaults as in Python (platform.EPSILON, kinematics.MODE_TOLERANCE, STOP_TOLERANCE).
 struct Settings {
   double epsilon = 0.01;          ///< Coulomb friction d_c tanh(velocity / epsilon), rad/s
@@ -116,13 +140,22 @@ class Model {
   static Status create(const Geometry& geometry, const Parameters& parameters, const Settings& settings,
                        Model* model) noexcept;
 
-  /// This model with other parameters (the geometry's precomputed parts kept), e.g. the m_ch, C_ch
-  /// of a PayloadTracker: no allocation, no exceptions, cheap enough per control step (a copy).
+  /// The same with the model beyond the paper; Status::invalid_model also when an extension value is
+  /// not finite or a Stribeck velocity of a stribeck model is not > 0.
+  static Status create(const Geometry& geometry, const Parameters& parameters, const Extension& extension,
+                       const Settings& settings, Model* model) noexcept;
+
+  /// This model with another extension (no allocation); Status::invalid_model (out untouched) as create.
+  Status with_extension(const Extension& extension, Model* out) const noexcept;
+
+  /// This model with other parameters (the geometry's precomputed parts and the extension kept), e.g.
+  /// the m_ch, C_ch of a PayloadTracker: no allocation, no exceptions, cheap enough per control step (a copy).
   /// Status::invalid_model (out untouched) when a parameter is not finite.
   Status with_parameters(const Parameters& parameters, Model* out) const noexcept;
 
-  /// Motor torques u (fl, rl, fr, rr; N m, motor side) of eq. (21). The per-step call: no heap
-  /// allocation, no exceptions. On any status but ok, u is zero (and motion, when given, too).
+  /// Motor torques u (fl, rl, fr, rr; N m, motor side) of eq. (21), with the forces of the extended
+  /// model when it has an extension. The per-step call: no heap allocation, no exceptions. On any
+  /// status but ok, u is zero (and motion, when given, too).
   Status feedforward(const Setpoint& setpoint, Vector4& u, JointMotion* motion = nullptr) const noexcept;
 
   /// q_dot and q_ddot of a setpoint, eq. (4) and (20), with the same checks as feedforward.
@@ -135,6 +168,7 @@ class Model {
   const Geometry& geometry() const noexcept { return geometry_; }
   const Parameters& parameters() const noexcept { return parameters_; }
   const Settings& settings() const noexcept { return settings_; }
+  const Extension& extension() const noexcept { return extension_; }
 
  private:
   Status check(const Setpoint& setpoint) const noexcept;
@@ -145,10 +179,14 @@ class Model {
   void motion(const Setpoint& setpoint, const Eigen::Matrix<double, 9, 2>& H, const Eigen::Matrix<double, 9, 2>& dH,
               JointMotion& motion) const noexcept;
   Vector9 forces(const JointMotion& motion) const noexcept;
+  // the forces the extension adds to those of eq. (16) (agvdyn.dynamics_extended.extension_forces);
+  // coulomb[i] = tanh(q_dot[i] / epsilon) for i = 3..8
+  Vector9 extension_forces(const JointMotion& motion, const double* coulomb) const noexcept;
 
   Geometry geometry_{};
   Parameters parameters_{};
   Settings settings_{};
+  Extension extension_{};
   Vector11 p_ = Vector11::Zero();
   double max_virtual_angle_ = 0;              // arctan(l/b)
   Eigen::Matrix<double, 9, 2> H1_ = Eigen::Matrix<double, 9, 2>::Zero();   // mode 1, steering at rest

@@ -1,4 +1,4 @@
-"""Commands on the model itself: identifiability (Table 1)."""
+"""Commands on the model itself: identifiability (Table 1); the model of a parameter file (issue 30)."""
 from __future__ import annotations
 
 import json
@@ -9,6 +9,20 @@ import typer
 
 from agvdyn.cli._app import app, fail, platform_option
 from agvdyn.cli._defaults import QR_TOLERANCE
+
+
+def model_parameters_option(path: Path, paper):
+    """What the feed-forward and the validation use of a ``--params`` file: ``paper`` (the file's
+    :class:`~agvdyn.platform.Parameters`, as read before) when the file has no model beyond the paper,
+    else its :class:`~agvdyn.model_spec.ModelParameters` (``model:`` block and extra parameters,
+    :func:`agvdyn.model_file.read_model_parameters`); a bad block is a named error."""
+    from agvdyn.model_file import read_model_parameters
+
+    try:
+        model = read_model_parameters(path)
+    except (ValueError, OSError) as exc:
+        raise fail(str(exc)) from exc
+    return paper if model.spec.is_paper and model.delay_s == 0.0 else model
 
 
 def _format_row(row) -> str:

@@ -255,6 +255,7 @@ def feedforward(
                                    "reference) or cpp (the C++ library of cpp/, see docs/cpp.md); equal to 1e-9."),
 ) -> None:
     """Write the planned trajectory with its feed-forward motor torques of eq. (21), one row per 2 ms."""
+    from agvdyn.cli.model_commands import model_parameters_option
     from agvdyn.ffcpp import CppEngineUnavailable
     from agvdyn.platform import platform_of_parameters
     from agvdyn.simulation import feedforward_table
@@ -268,8 +269,8 @@ def feedforward(
         typer.secho(f"warning: {warning}", fg=typer.colors.YELLOW, err=True)
     _output(out)
     try:
-        table = feedforward_table(experiment, content.parameters, geom, limits=None if no_check else Limits(),
-                                  engine=engine.value)
+        table = feedforward_table(experiment, model_parameters_option(params, content.parameters), geom,
+                                  limits=None if no_check else Limits(), engine=engine.value)
     except (TrajectoryError, ValueError, CppEngineUnavailable) as exc:
         raise fail(str(exc)) from exc
     if out.suffix.lower() == ".csv":

@@ -22,6 +22,7 @@ import numpy as np
 
 from agvdyn.kinematics import MODE_TOLERANCE, STOP_TOLERANCE, Mode
 from agvdyn.kinematics.constraints import _rows
+from agvdyn.model_spec import FRICTION_GROUPS, ModelParameters
 from agvdyn.platform import EPSILON, Geometry, Parameters
 
 __all__ = ["Engine", "ENGINES", "CppEngineUnavailable", "available", "extension", "check_engine",
@@ -77,10 +78,21 @@ def available() -> bool:
     return True
 
 
-def _model(geom: Geometry, params: Parameters, epsilon: float, tolerance: float):
+def _extension(params: Parameters | ModelParameters) -> dict:
+    """The keyword arguments of ``_core.Model`` for the model beyond the paper (``agvdyn_ff::Extension``)."""
+    if not isinstance(params, ModelParameters):
+        return {}
+    groups = [params.friction(g) for g in FRICTION_GROUPS]
+    return {"stribeck": params.spec.stribeck, "d_s": tuple(float(g[2]) for g in groups),
+            "w_s": tuple(float(g[3]) for g in groups), "com_offset": params.spec.com_offset,
+            "x_c": float(params.value("x_c")), "y_c": float(params.value("y_c")), "delay_s": float(params.delay_s)}
+
+
+def _model(geom: Geometry, params: Parameters | ModelParameters, epsilon: float, tolerance: float):
     core = extension()
-    return core.Model((geom.l, geom.b, geom.a, geom.r, geom.i_G), [float(v) for v in params.to_vector()],
-                      float(epsilon), float(tolerance), float(STOP_TOLERANCE))
+    values = params.parameters if isinstance(params, ModelParameters) else params
+    return core.Model((geom.l, geom.b, geom.a, geom.r, geom.i_G), [float(v) for v in values.to_vector()],
+                      float(epsilon), float(tolerance), float(STOP_TOLERANCE), **_extension(params))
 
 
 def _torques(model, core, mode: Mode, alpha, s_dot, s_ddot, *, motion: bool = False):
@@ -104,10 +116,11 @@ def _torques(model, core, mode: Mode, alpha, s_dot, s_ddot, *, motion: bool = Fa
     return (u, q_dot, q_ddot) if motion else u
 
 
-def feedforward_torques(geom: Geometry, params: Parameters, mode, alpha, s_dot, s_ddot, *,
+def feedforward_torques(geom: Geometry, params: Parameters | ModelParameters, mode, alpha, s_dot, s_ddot, *,
                         epsilon: float = EPSILON, tolerance: float = MODE_TOLERANCE) -> np.ndarray:
-    """Motor torques u ``(N, 4)`` of eq. (21) computed by the C++ library; same arguments, same result
-    (to round-off) and the same refusals (ValueError) as :func:`agvdyn.dynamics.feedforward_torques`."""
+    """Motor torques u ``(N, 4)`` of eq. (21) computed by the C++ library; same arguments (a
+    :class:`~agvdyn.model_spec.ModelParameters` for the model beyond the paper), same result (to
+    round-off) and the same refusals (ValueError) as :func:`agvdyn.dynamics.feedforward_torques`."""
     mode = Mode.from_label(mode)
     return _torques(_model(geom, params, epsilon, tolerance), extension(), mode, alpha, s_dot, s_ddot)
 
@@ -122,7 +135,7 @@ def joint_motion(geom: Geometry, mode, alpha, s_dot, s_ddot, *, tolerance: float
     return q_dot, q_ddot
 
 
-def trajectory_feedforward(traj, params: Parameters) -> np.ndarray:
+def trajectory_feedforward(traj, params: Parameters | ModelParameters) -> np.ndarray:
     """Feed-forward torques ``(N, 4)`` of a :class:`agvdyn.trajectories.Trajectory`, segment by segment
     (the C++ twin of ``Trajectory.feedforward``)."""
     core = extension()
@@ -132,7 +145,9 @@ def trajectory_feedforward(traj, params: Parameters) -> np.ndarray:
 
 def read_parameter_file(path) -> dict:
     """What the C++ reader (``agvdyn_ff::read_parameter_file``) finds in a parameter file:
-    ``{"parameters": {name: value}, "platform": {name, l, b, a, r, i_G} or None}``; ValueError otherwise."""
+    ``{"parameters": {name: value}, "platform": {name, l, b, a, r, i_G} or None, "model": {friction,
+    delay_s, com_offset} or None, "extra": {name: value}}`` (the extra parameters of the model's
+    extensions, :data:`agvdyn.model_spec.EXTRA_NAMES`); ValueError otherwise."""
     return extension().read_parameter_file(str(path))
 
 
