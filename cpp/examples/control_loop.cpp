@@ -3,7 +3,9 @@
 //   control_loop PARAMS.yaml FEEDFORWARD.csv [--platform PLATFORM.yaml] [--rate HZ] [--free-run]
 //                [--quiet] [--check TOL] [--track ROWS.csv]
 //
-// PARAMS: a parameter file of `agvdyn identify` (YAML or JSON; its `platform` is the vehicle).
+// PARAMS: a parameter file of `agvdyn identify` (YAML or JSON; its `platform` is the vehicle; a
+// `model:` block, the model beyond the paper: Stribeck friction and an off-centre chassis enter the
+// torques, a torque delay does not: see ff::Extension).
 // FEEDFORWARD.csv: a table of `agvdyn feedforward` (one row per 2 ms: t, segment, mode, alpha_l,
 // alpha_r, the planned q_dot, ...). Everything that may allocate happens before the loop: reading
 // the files, building the Model, turning each row into a Setpoint (s_dot = H_k^+ q_dot, s_ddot by
@@ -166,7 +168,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "warning: the parameter file names no platform: using the built-in prototype\n");
   }
   ff::Model model;
-  if (ff::Model::create(geometry, file.parameters, ff::Settings{}, &model) != ff::Status::ok) {
+  if (ff::Model::create(geometry, file.parameters, file.extension, ff::Settings{}, &model) != ff::Status::ok) {
     std::fprintf(stderr, "error: invalid geometry or parameters\n");
     return 2;
   }
