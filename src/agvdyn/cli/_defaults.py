@@ -52,3 +52,9 @@ OPTION_FIELDS = {
     "max_inflation": "fit.max_inflation", "max_relative_std": "fit.max_relative_std", "estimator": "fit.estimator",
     "unexcited": "fit.unexcited", "uncertainty": "uncertainty.method", "bandwidth": "uncertainty.bandwidth",
 }
+
+# The model options of ``identify`` (issue 30; tests/test_model_selection.py checks them against agvdyn.model_spec).
+#: agvdyn.model_spec.DELAY_RANGE (s)
+DELAY_RANGE = (0.0, 0.02)
+#: agvdyn.model_spec.STRIBECK_RANGE (rad/s)
+STRIBECK_RANGE = (0.005, 0.5)

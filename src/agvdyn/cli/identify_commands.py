@@ -12,7 +12,7 @@ from rich.console import Console
 from agvdyn.cli._app import app, fail, numbers_by_name
 from agvdyn.cli._outputs import log_inputs, refuse_overwrite
 from agvdyn.cli._tables import Column, print_items, print_parameters, print_table
-from agvdyn.cli import _defaults as D
+from agvdyn.cli import _defaults as D, _model_options as M
 
 # The library (scipy, numba) is imported inside the functions that use it: ``agvdyn --help`` stays fast.
 
@@ -113,10 +113,11 @@ def _settings(*, filtering: str = D.FILTERING, cutoff: float = D.CUTOFF, order: 
 
 
 def _identified(paths: list[Path], platform: Optional[Path], mapping: Optional[Path], fixed, settings,
-                experiment: str = "auto", **options):
+                experiment: str = "auto", search=None, **options):
     """The logs opened (read one at a time, a long one in pieces: memory does not grow with their number
-    or length), then identify() or, for lifted-wheel logs, identify_lifted(); refusals for data quality
-    as exit code 1, bad input as exit code 2."""
+    or length), then identify() or, for lifted-wheel logs, identify_lifted() (``search``: the model's
+    search or comparison instead, ``_model_options.modelled``); refusals for data quality as exit code 1,
+    bad input as exit code 2."""
     from agvdyn.identification import (
         ImplausibleError, UnidentifiableError, experiment_of, identify as identify_parameters, identify_lifted,
         platform_for)
@@ -126,10 +127,13 @@ def _identified(paths: list[Path], platform: Optional[Path], mapping: Optional[P
         logs = open_logs(paths, mapping=mapping, platform=platform)
         geometry = platform_for(logs, platform)
         if experiment_of(logs, experiment) == "lifted-wheel":
+            if search is not None:
+                raise ValueError("--model, --compare-models: lifted-wheel logs are identified with the paper's model")
             return identify_lifted([log.load() for log in logs], geometry, settings=settings)
-        return identify_parameters(logs, geometry, fixed=fixed, settings=settings,
-                                   experiment="auto" if str(experiment).strip().lower() == "auto" else "vehicle",
-                                   **options)
+        kind = "auto" if str(experiment).strip().lower() == "auto" else "vehicle"
+        if search is not None:
+            return search(logs, geometry, fixed, settings, kind, options["workers"])
+        return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=kind, **options)
     except (UnidentifiableError, ImplausibleError) as exc:
         raise fail(f"refused: {exc}", code=1) from exc
     except (ValueError, OSError) as exc:
@@ -176,14 +180,19 @@ def identify(
     threads: Annotated[Optional[int], typer.Option(
         "--threads", min=1, help="Threads reading and reducing the logs (default: the cores, at most 2; "
                                  "or AGVDYN_THREADS). The result does not depend on it.")] = None,
+    model: M.ModelOpt = "paper",
+    compare_models: M.CompareOpt = False,
+    delay_range: M.DelayRangeOpt = None,
+    stribeck_range: M.StribeckRangeOpt = None,
+    validation: M.ValidationOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
 
     Exit codes: 0 identified, 1 refused for data quality (not excited, implausible), 2 bad input.
     """
-    refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--platform": platform, "--mapping": mapping},
-                     kinds={"--out": "parameter file"})
+    refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--platform": platform, "--mapping": mapping,
+                                      **log_inputs("--validation", [validation])}, kinds={"--out": "parameter file"})
     fixed = _fixed(fix)
     settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
                          steering_stiction=steering_stiction, stiction_guard=stiction_guard,
@@ -191,13 +200,15 @@ def identify(
                          torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
                          max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
                          uncertainty=uncertainty, bandwidth=bandwidth)
-    ident = _identified(logs, platform, mapping, fixed, settings, experiment, keep_blocks=False, workers=threads)
+    search = M.search_of(model, compare_models, delay_range, stribeck_range, validation, mapping, platform, settings)
+    ident = _identified(logs, platform, mapping, fixed, settings, experiment, search, keep_blocks=False, workers=threads)
+    ident, selection = ident if isinstance(ident, tuple) else (ident, None)
     try:
         written = ident.write(out)
     except OSError as exc:
         raise fail(f"{out}: cannot be written: {exc}") from exc
     if as_json:
-        data = ident.to_json_dict()
+        data = M.with_selection(ident.to_json_dict(), selection)
         data["out"] = str(written)
         typer.echo(json.dumps(data, indent=2))
         return
@@ -224,6 +235,7 @@ def identify(
         console.print(f"note: {note}")
     for warning in ident.warnings:
         console.print(f"[yellow]warning:[/yellow] {warning}")
+    M.print_model(console, ident, selection)
     console.print(f"wrote {written}")
 
 
@@ -262,6 +274,7 @@ def validate(
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the generalized torques of an unseen log and print the NRMSE per generalized coordinate."""
+    from agvdyn.cli.model_commands import model_parameters_option
     from agvdyn.platform import PROTOTYPE, platform_of_parameters, read_parameters, read_platform
     from agvdyn.validation import validate as validate_log
 
@@ -284,7 +297,7 @@ def validate(
                         f"parameter file ({geometry.describe()}); using the parameter file's", fg=typer.colors.YELLOW,
                         err=True)
     try:
-        val = validate_log(loaded, content.parameters, geometry, settings=settings)
+        val = validate_log(loaded, model_parameters_option(params, content.parameters), geometry, settings=settings)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     if as_json:
