@@ -136,11 +136,7 @@ def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, *,
 
 
 def with_selection(data: dict, selection) -> dict:
-    """The JSON of ``identify`` with ``model_selection`` (when compared); ``model.delay_std_s`` of an
-    unbounded interval as null with ``delay_identified: false`` (JSON has no infinity)."""
-    model = data.get("model")
-    if model and model.get("delay_std_s") is not None and not math.isfinite(model["delay_std_s"]):
-        data["model"] = {**model, "delay_std_s": None, "delay_identified": False}
+    """The JSON of ``identify`` with ``model_selection`` (when compared)."""
     if selection is not None:
         data["model_selection"] = selection.to_list()
     return data

@@ -58,3 +58,15 @@ __all__ = [
     "dependent_parameters", "variance_inflation", "identify", "fit_blocks", "fit_regression", "load_logs", "platform_for",
     "row_passes", "identify_lifted", "experiment_of", "LiftedWheelIdentification",
 ]
+
+#: Entry points of the model beyond the paper (issue 30), imported when first used (start-up of the CLI).
+_MODEL_SELECTION = {"identify_model": "model_search", "compare_models": "selection", "ModelSelection": "selection"}
+__all__ += list(_MODEL_SELECTION)
+
+
+def __getattr__(name: str):
+    if name in _MODEL_SELECTION:
+        import importlib
+
+        return getattr(importlib.import_module(f"agvdyn.identification.{_MODEL_SELECTION[name]}"), name)
+    raise AttributeError(f"module 'agvdyn.identification' has no attribute {name!r}")
