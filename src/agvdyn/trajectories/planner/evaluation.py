@@ -10,6 +10,7 @@ import numpy as np
 from agvdyn.determinacy import std_from_information
 from agvdyn.dynamics import projected_regressor
 from agvdyn.kinematics import Mode, joint_motion, kinematic_model
+from agvdyn.model_spec import ModelParameters, ModelSpec
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, Geometry, Parameters
 from agvdyn.row_rules import row_mask
 from agvdyn.trajectories.errors import TrajectoryError
@@ -18,6 +19,7 @@ from agvdyn.trajectories.fourier import FourierSeries
 from agvdyn.trajectories.limits import FloorSpace, Limits, floor_space, limit_report
 from agvdyn.trajectories.segments import Trajectory
 from agvdyn.trajectories.planner.problem import _sequence
+from agvdyn.trajectories.planner.model_columns import extra_names, segment_columns, stribeck_velocities
 from agvdyn.trajectories.planner.weights import _row_weights
 from agvdyn.trajectories.planner.settings import _OFFSETS, FREE, PlanSettings
 
@@ -57,14 +59,17 @@ def _coordinates(seg) -> list[tuple[int, str]]:
     return list(enumerate(seg.mode.coordinates))
 
 
-def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool = False, with_bw: bool = False,
+                   model: ModelParameters | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows (m, 10 + 4) of eq. (19) the identification keeps (ten parameters, with ``with_bw`` eleven,
-    then the offset columns), the noise level of each row's coordinate and the row's variance
-    factor (:meth:`NoiseLevels.variance_factor`); ``validity``: the optimiser's smooth weights
-    instead of the mask, and its noise levels (``PlanSettings.levels``)."""
+    then the columns of ``model``'s extensions (:mod:`.model_columns`), then the offset columns), the
+    noise level of each row's coordinate and the row's variance factor
+    (:meth:`NoiseLevels.variance_factor`); ``validity``: the optimiser's smooth weights instead of
+    the mask, and its noise levels (``PlanSettings.levels``)."""
     g = traj.geometry
     n_p = 11 if with_bw else 10
+    spec = None if model is None or model.spec.is_paper else model.spec
+    n_x = 0 if spec is None else len(extra_names(spec))
     noise = settings.levels(weights=validity)
     rows, sig, fac = [], [], []
     for seg in traj.segments:
@@ -73,6 +78,10 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
         qd, qdd = joint_motion(g, seg.mode, seg.alpha, seg.s_dot, seg.s_ddot)
         Y = projected_regressor(g, seg.mode, seg.alpha, qd, qdd)
         H = kinematic_model(g, seg.mode, seg.alpha)
+        X = None
+        if spec is not None:
+            u = seg.feedforward(g, model.parameters, (qd, qdd)) if spec.delay != 0.0 else np.zeros((len(qd), 4))
+            X = segment_columns(g, spec, stribeck_velocities(model), H, qd, qdd, u, traj.sample_time, Y)
         for j, coord in ([(0, "alpha_l"), (1, "alpha_r")] if seg.mode is Mode.PARKING else _coordinates(seg)):
             v = seg.s_dot[:, j]
             th = settings.threshold(coord)
@@ -86,12 +95,13 @@ def _sequence_rows(traj: Trajectory, settings: PlanSettings, *, validity: bool =
             if not keep.any():
                 continue
             offs = g.i_G * H[keep, 5:, j] if settings.torque_offsets else np.zeros((int(keep.sum()), _OFFSETS))
-            block = np.concatenate([Y[keep, j, :n_p], offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
+            extra = X[keep, j, :] if X is not None else np.zeros((int(keep.sum()), 0))
+            block = np.concatenate([Y[keep, j, :n_p], extra, offs], axis=1) * np.sqrt(keep_w[keep])[:, None]
             rows.append(block)
             sig.append(np.full(int(keep.sum()), noise.of(coord)))
             fac.append(noise.variance_factor(coord, seg.s_ddot[keep, j]))
     if not rows:
-        return np.zeros((0, n_p + _OFFSETS)), np.zeros(0), np.zeros(0)
+        return np.zeros((0, n_p + n_x + _OFFSETS)), np.zeros(0), np.zeros(0)
     return np.concatenate(rows), np.concatenate(sig), np.concatenate(fac)
 
 
@@ -107,7 +117,8 @@ def _row_variance(A: np.ndarray, sig: np.ndarray, factor: np.ndarray) -> np.ndar
 
 
 def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, limits: Limits = Limits(),
-                      settings: PlanSettings = PlanSettings(), *, estimate_bw: bool = False) -> SequenceEvaluation:
+                      settings: PlanSettings = PlanSettings(), *, estimate_bw: bool = False,
+                      model: ModelSpec | ModelParameters | None = None) -> SequenceEvaluation:
     """Predicted cond, standard deviations, floor, duration and peak torque of an identification
     sequence, from its planned motion with the identification's stiction mask and guard.
 
@@ -118,14 +129,21 @@ def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, l
 
     ``estimate_bw``: B_w estimated with the others (``identify --fix none``) instead of known; its
     std is then in ``std`` too (infinite when the motion does not determine it).
+
+    ``model``: the model beyond the paper that will be identified (issue 30; a ModelSpec, or a
+    ModelParameters whose values set the Stribeck velocities, the offset and the planned torques):
+    its estimated parameters are in ``std`` too (:mod:`.model_columns`): ``d_sl, d_sr, d_sw``,
+    ``y_c`` (and ``x_c``, infinite: no mode of this vehicle excites it), ``delay_s``.
     """
     names = FREE + (("B_w",) if estimate_bw else ())
     n_p = len(names)
-    A, sig, factor = _sequence_rows(traj, settings, with_bw=estimate_bw)
+    model = _model_values(model, params)
+    A, sig, factor = _sequence_rows(traj, settings, with_bw=estimate_bw, model=model)
     F, U = _information(A, sig, n_p)
     Omega = _row_variance(A, sig, factor)
     d, cov, det, _ = std_from_information(F, Omega)
     std = d[:n_p]
+    extra = _extra_std(model, d, cov, n_p, names)
     corr: dict[str, float] = {}
     with np.errstate(divide="ignore", invalid="ignore"):
         r = cov / np.outer(d, d)
@@ -137,10 +155,49 @@ def evaluate_sequence(traj: Trajectory, params: Parameters = PAPER_PARAMETERS, l
     p = params.to_vector()[:n_p]
     report = limit_report(traj, params, limits)
     return SequenceEvaluation(
-        cond=cond, std={n: float(s) for n, s in zip(names, std)},
+        cond=cond, std={**{n: float(s) for n, s in zip(names, std)}, **extra},
         relative_std={n: float(s / abs(v)) for n, s, v in zip(names, std, p)},
         floor=floor_space(traj), duration=traj.duration, peak_torque=report.peaks["motor_torque"],
         correlation=corr)
+
+
+def _model_values(model: ModelSpec | ModelParameters | None, params: Parameters) -> ModelParameters | None:
+    """The model as values: a spec gets ``params`` and the paper's law for its extras (``d_s = d_c``,
+    the offset 0, its Stribeck velocities or the middle of its range)."""
+    if model is None or isinstance(model, ModelParameters):
+        return model
+    spec = model.replace(delay=0.0 if model.delay == 0.0 else model.delay)
+    extra = {}
+    if spec.stribeck:
+        w_s = stribeck_velocities(spec)
+        extra.update({f"d_s{g}": getattr(params, f"d_c{g}") for g in "lrw"})
+        extra.update({f"w_s{g}": w for g, w in zip("lrw", w_s)})
+    if spec.com_offset:
+        extra.update(x_c=0.0, y_c=0.0)
+    return ModelParameters(params, extra, 0.0 if spec.delay == "auto" else float(spec.delay), spec)
+
+
+def _extra_std(model: ModelParameters | None, d: np.ndarray, cov: np.ndarray, n_p: int,
+               names: tuple[str, ...]) -> dict[str, float]:
+    """Predicted stds of the extensions' parameters; ``y_c = (m_ch y_c) / m_ch`` by the delta method."""
+    if model is None or model.spec.is_paper:
+        return {}
+    out = {}
+    for k, name in enumerate(extra_names(model.spec)):
+        i = n_p + k
+        if name != "y_c":
+            out[name] = float(d[i])
+            continue
+        m, y_c, j = model.parameters.m_ch, model.value("y_c"), names.index("m_ch")
+        if not (math.isfinite(d[i]) and math.isfinite(d[j])):
+            out["y_c"] = math.inf
+            continue
+        grad = np.array([1.0 / m, -y_c / m])  # d y_c / d (m y_c, m_ch), m y_c's column holds m_ch y_c
+        sub = cov[np.ix_([i, j], [i, j])]
+        out["y_c"] = float(math.sqrt(max(grad @ sub @ grad, 0.0)))
+    if model.spec.com_offset:
+        out["x_c"] = math.inf  # its column vanishes in every mode (model_columns)
+    return out
 
 
 def _cond(U: np.ndarray) -> float:
