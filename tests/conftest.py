@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import strategies as st
 
 from agvdyn.kinematics import Mode, max_virtual_angle, nominal_steering, steering_from_virtual
@@ -25,3 +26,17 @@ def configurations(geom: Geometry, mode: Mode, n: int, rng: np.random.Generator)
     if mode is Mode.CAR_LIKE:
         return steering_from_virtual(geom, rng.uniform(-0.97, 0.97, n) * max_virtual_angle(geom))
     return np.tile(nominal_steering(geom, mode), (n, 1))
+
+
+@pytest.fixture(scope="session")
+def short_sequence():
+    """The identification sequence with 4-5 s segments (the default one lasts 118 s): the simulator's tests."""
+    import math
+
+    from agvdyn.trajectories import FourierSeries, identification_sequence
+
+    def series(period: float, peak: float) -> FourierSeries:
+        return FourierSeries.at_rest(2 * math.pi / period, (1.0, -0.5, 0.3), (0.2, 0.5, -0.4), peak_velocity=peak)
+
+    return identification_sequence(steer_left=series(4, 1.2), steer_right=series(4, 1.2),
+                                   straight=series(5, 0.4), rotation=series(5, 0.5), pause=0.2)

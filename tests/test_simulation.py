@@ -26,7 +26,6 @@ from agvdyn.trajectories import (
     LimitError,
     Trajectory,
     fourier_segment,
-    identification_sequence,
     lane_change,
     lateral_experiment,
 )
@@ -36,13 +35,6 @@ G, P = PROTOTYPE, PAPER_PARAMETERS
 
 def _series(period: float, peak: float) -> FourierSeries:
     return FourierSeries.at_rest(2 * math.pi / period, (1.0, -0.5, 0.3), (0.2, 0.5, -0.4), peak_velocity=peak)
-
-
-@pytest.fixture(scope="module")
-def short_sequence() -> Trajectory:
-    """The identification sequence with 4 s segments (the default one lasts 118 s)."""
-    return identification_sequence(steer_left=_series(4, 1.2), steer_right=_series(4, 1.2),
-                                   straight=_series(5, 0.4), rotation=_series(5, 0.5), pause=0.2)
 
 
 @pytest.fixture(scope="module")

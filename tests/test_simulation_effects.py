@@ -17,24 +17,13 @@ from agvdyn.simulation import PlantSettings, SensorSettings, SimulationSettings,
 from agvdyn.simulation.payload import PayloadEvent
 from agvdyn.simulation.plant import parse_breakaway
 from agvdyn.simulation.sensors import delayed_torques
-from agvdyn.trajectories import FourierSeries, Trajectory, identification_sequence
+from agvdyn.trajectories import Trajectory
 
 G, P = PROTOTYPE, PAPER_PARAMETERS
 #: Clean joints for the friction tests: exact wheel radii, no unit masses (the coupling is not the point).
 CLEAN = PlantSettings(steering_masses=False, wheel_radius_error=(0.0,) * 4)
 #: Joint group -> (steering side or None for the wheels, sliding level d_c, viscous d_v).
 GROUPS = {"l": (0, P.d_cl, P.d_vl), "r": (1, P.d_cr, P.d_vr), "w": (None, P.d_cw, P.d_vw)}
-
-
-def _series(period: float, peak: float) -> FourierSeries:
-    return FourierSeries.at_rest(2 * math.pi / period, (1.0, -0.5, 0.3), (0.2, 0.5, -0.4), peak_velocity=peak)
-
-
-@pytest.fixture(scope="module")
-def short_sequence() -> Trajectory:
-    """The identification sequence with 4-5 s segments (as tests/test_simulation.py)."""
-    return identification_sequence(steer_left=_series(4, 1.2), steer_right=_series(4, 1.2),
-                                   straight=_series(5, 0.4), rotation=_series(5, 0.5), pause=0.2)
 
 
 @pytest.fixture(scope="module")
@@ -180,9 +169,9 @@ def test_torque_delay_on_the_lifted_wheels():
     np.testing.assert_array_equal(late.torque_measured[2:], base.torque_measured[:-2])
 
 
-def test_torque_delay_on_mujoco():
+def test_torque_delay_on_mujoco(short_sequence):
     pytest.importorskip("mujoco")
-    traj = Trajectory(identification_sequence(steer_left=_series(4, 1.2)).segments[:2])
+    traj = Trajectory(short_sequence.segments[:2])
     base = simulate(traj, seed=1, engine="mujoco")
     late = simulate(traj, seed=1, engine="mujoco", settings=SimulationSettings(sensors=SensorSettings(torque_delay=0.002)))
     np.testing.assert_array_equal(late.alpha_measured, base.alpha_measured)
