@@ -99,19 +99,26 @@ def _floats(x) -> list[float]:
     return [float(v) for v in np.ravel(x)]
 
 
-def valid_cases(models, rng) -> list[dict[str, Any]]:
+def _mode_cases(index: int, geom, params, rng, slow: bool = False) -> list[dict[str, Any]]:
+    """CASES_PER_MODE random setpoints of every mode with their motion and torques (``params``: Parameters
+    or ModelParameters); ``slow``: joint rates scaled down to 1 % of the usual (the Stribeck range)."""
     cases = []
-    for index, (_, geom, params) in enumerate(models):
-        for mode in Mode:
-            alpha = configurations(geom, mode, CASES_PER_MODE, rng)
-            s_dot, s_ddot = motions(mode, CASES_PER_MODE, rng)
-            u = feedforward_torques(geom, params, mode, alpha, s_dot, s_ddot)
-            q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot)
-            for j in range(CASES_PER_MODE):
-                cases.append({"model": index, "mode": mode.label, "alpha": _floats(alpha[j]),
-                              "s_dot": _floats(s_dot[j]), "s_ddot": _floats(s_ddot[j]),
-                              "q_dot": _floats(q_dot[j]), "q_ddot": _floats(q_ddot[j]), "u": _floats(u[j])})
+    for mode in Mode:
+        alpha = configurations(geom, mode, CASES_PER_MODE, rng)
+        s_dot, s_ddot = motions(mode, CASES_PER_MODE, rng)
+        if slow:
+            s_dot *= 10.0 ** rng.uniform(-2.0, 0.0, (CASES_PER_MODE, 1))
+        u = feedforward_torques(geom, params, mode, alpha, s_dot, s_ddot)
+        q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot)
+        for j in range(CASES_PER_MODE):
+            cases.append({"model": index, "mode": mode.label, "alpha": _floats(alpha[j]),
+                          "s_dot": _floats(s_dot[j]), "s_ddot": _floats(s_ddot[j]),
+                          "q_dot": _floats(q_dot[j]), "q_ddot": _floats(q_ddot[j]), "u": _floats(u[j])})
     return cases
+
+
+def valid_cases(models, rng) -> list[dict[str, Any]]:
+    return [c for index, (_, geom, params) in enumerate(models) for c in _mode_cases(index, geom, params, rng)]
 
 
 def invalid_cases(models) -> list[dict[str, Any]]:
@@ -178,20 +185,8 @@ def extended_models(models) -> list[tuple[int, ModelParameters]]:
 def extended_cases(models, extended, rng) -> list[dict[str, Any]]:
     """Cases of every mode on each extended model; joint rates down to 1 % of the usual, through
     the Stribeck range."""
-    cases = []
-    for index, (vehicle, model) in enumerate(extended):
-        geom = models[vehicle][1]
-        for mode in Mode:
-            alpha = configurations(geom, mode, CASES_PER_MODE, rng)
-            s_dot, s_ddot = motions(mode, CASES_PER_MODE, rng)
-            s_dot *= 10.0 ** rng.uniform(-2.0, 0.0, (CASES_PER_MODE, 1))
-            u = feedforward_torques(geom, model, mode, alpha, s_dot, s_ddot)
-            q_dot, q_ddot = joint_motion(geom, mode, alpha, s_dot, s_ddot)
-            for j in range(CASES_PER_MODE):
-                cases.append({"model": index, "mode": mode.label, "alpha": _floats(alpha[j]),
-                              "s_dot": _floats(s_dot[j]), "s_ddot": _floats(s_ddot[j]),
-                              "q_dot": _floats(q_dot[j]), "q_ddot": _floats(q_ddot[j]), "u": _floats(u[j])})
-    return cases
+    return [c for index, (vehicle, model) in enumerate(extended)
+            for c in _mode_cases(index, models[vehicle][1], model, rng, slow=True)]
 
 
 def _extended_entry(vehicle: int, model: ModelParameters) -> dict[str, Any]:
