@@ -331,3 +331,58 @@ def test_verdict_of_an_implausible_refusal_names_values_and_cause():
     assert verdict.outcome is Outcome.REFUSED and verdict.exit_code == 1
     assert "physically impossible" in verdict.summary
     assert verdict.reasons[0].startswith("m_ch = -48.4") and "m_fr, m_rr" in verdict.reasons[1]
+
+
+# --- the payload tracking section (issue 31) -------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def payload_log(tmp_path_factory):
+    """The identification experiment with +250 kg picked up at 64 s (centred, C 40 kg m^2)."""
+    from agvdyn.simulation import SimulationSettings, simulate
+    from agvdyn.simulation.payload import PayloadEvent
+
+    path = tmp_path_factory.mktemp("tracking") / "ident_payload.parquet"
+    simulate("identification", settings=SimulationSettings(payload=(PayloadEvent(64.0, 250.0, 0.0, 0.0, 40.0),)),
+             seed=1).write(path)
+    return path
+
+
+def test_report_tracks_the_payload_with_track(payload_log, tmp_path):
+    """``make_report(track=True)``: the section replays the logs with the identified parameters, names the
+    pick-up (m_ch) within 2 s of 64 s, knows the simulated truth and ends within 1 % of it; the figure has
+    the two parameters; the HTML has the section, its figure and its nav entry."""
+    from agvdyn.report.track_section import track_report_figure
+
+    report = make_report(load_logs([payload_log]), PROTOTYPE, track=True)
+    section = report.tracking
+    assert section is not None and section.truth and section.truth[0][0] == pytest.approx(64.0, abs=0.01)
+    m_events = [e for e in section.events if e.parameter == "m_ch"]
+    assert m_events and 64.0 < m_events[0].t_detected < 66.0 and m_events[0].t_change == pytest.approx(64.0, abs=2.0)
+    assert abs(section.estimate[-1, 0] / section.truth[-1][1] - 1) < 0.01 and np.all(section.std > 0)
+    fig = track_report_figure(section)
+    assert isinstance(fig, Figure) and [a.get_ylabel() for a in fig.axes] == ["m_ch (kg)", "C_ch (kg m^2)"]
+    text = write_report(tmp_path / "r.html", report).read_text()
+    assert 'id="tracking"' in text and 'href="#tracking"' in text and "Payload tracking" in _text(text)
+    section_html = text[text.index('id="tracking"'):text.index('id="provenance"')]
+    assert len(re.findall(r"data:image/png;base64,", section_html)) == 1 and "Tracked m_ch and C_ch" in section_html
+
+
+def test_cli_report_shows_a_tracking_table_and_names_a_bad_one(payload_log, tmp_path):
+    """``agvdyn report --tracking`` with the table ``agvdyn track`` wrote: the section with its change; a
+    table without the ``event`` column is refused naming the file and the column (exit 2)."""
+    import pandas as pd
+
+    params, table = tmp_path / "p.yaml", tmp_path / "track.parquet"
+    write_parameters(params, PAPER_PARAMETERS)
+    runner = CliRunner()
+    assert runner.invoke(app, ["track", str(payload_log), "--params", str(params), "--out", str(table)]).exit_code == 0
+    out = tmp_path / "r.html"
+    res = runner.invoke(app, ["report", "--ident", str(payload_log), "--out", str(out), "--tracking", str(table)])
+    assert res.exit_code == 0, res.output
+    text = _text(out.read_text())
+    assert "Payload tracking" in text and "tracking table" in text and "m_ch" in text
+    bad = tmp_path / "bad.csv"
+    pd.read_parquet(table).drop(columns="event").to_csv(bad, index=False)
+    res = runner.invoke(app, ["report", "--ident", str(payload_log), "--out", str(tmp_path / "r2.html"),
+                              "--tracking", str(bad)])
+    assert res.exit_code == 2 and "bad.csv" in res.output and "'event'" in res.output

@@ -1,5 +1,5 @@
-// PayloadTracker (include/agvdyn_ff/tracker.hpp): the kernels of agvdyn/online/_kernels.py
-// (track_rows, _update, _joseph, _add_row, _detect, _reset), statement by statement and in the
+// PayloadTracker (include/agvdyn_ff/tracker.hpp): the kernels of agvdyn/online/_kernels.py (track_rows,
+// _update, _joseph, _add_row, _detect, _reset_payload, _inverse_spd), statement by statement and in the
 // same order of floating-point operations, so that both give the same numbers (round-off; the
 // shared vectors hold them to 1e-9 relative). Plain loops on fixed-size storage rather than Eigen
 // expressions: the summation order must be Python's.
@@ -15,6 +15,8 @@ namespace {
 constexpr int NS = kTrackerStates;
 // CUSUM level below which its window (start sample and statistics) restarts (_kernels.RESTART).
 constexpr double kRestart = 1.0;
+// A row bias learnt from fewer than kYoungWarmups x warm_rows rows of its kind is young (_kernels.YOUNG_WARMUPS).
+constexpr double kYoungWarmups = 10.0;
 
 bool finite(double x) noexcept { return std::isfinite(x); }
 bool positive(double x) noexcept { return std::isfinite(x) && x > 0; }
@@ -46,20 +48,85 @@ void joseph(TrackerMatrix& P, const double* K, const double* f, double r_eff) no
   }
 }
 
-// Parameter i from its CUSUM's window, the other states held (_kernels._reset).
-void reset(int i, TrackerVector& theta, TrackerMatrix& P, const TrackerMatrix& I, const TrackerVector& b,
-           double reset_var) noexcept {
-  const double lam = 1.0 / reset_var + I(i, i);
-  double rhs = theta[i] / reset_var + b[i];
-  for (int q = 0; q < NS; ++q) {
-    if (q != i) rhs -= I(i, q) * theta[q];
+// out = A^-1 of a symmetric positive definite matrix by Gauss-Jordan without pivoting (_kernels._inverse_spd).
+void inverse_spd(const double (&A)[NS][NS], double (&out)[NS][NS]) noexcept {
+  double M[NS][NS];
+  for (int p = 0; p < NS; ++p) {
+    for (int q = 0; q < NS; ++q) {
+      M[p][q] = A[p][q];
+      out[p][q] = p == q ? 1.0 : 0.0;
+    }
   }
-  theta[i] = rhs / lam;
-  for (int q = 0; q < NS; ++q) {
-    P(i, q) = 0.0;
-    P(q, i) = 0.0;
+  for (int c = 0; c < NS; ++c) {
+    const double d = M[c][c];
+    for (int q = 0; q < NS; ++q) {
+      M[c][q] /= d;
+      out[c][q] /= d;
+    }
+    for (int p = 0; p < NS; ++p) {
+      if (p == c) continue;
+      const double f = M[p][c];
+      if (f != 0.0) {
+        for (int q = 0; q < NS; ++q) {
+          M[p][q] -= f * M[c][q];
+          out[p][q] -= f * out[c][q];
+        }
+      }
+    }
   }
-  P(i, i) = 1.0 / lam;
+}
+
+// A payload change (_kernels._reset_payload): m_ch, C_ch and the young row biases the window saw (fewer
+// than `young` rows of their kind) re-estimated together from a CUSUM's window (I, b), priors at their
+// values with variances reset_var and bias_var, the other biases held; the covariance of the
+// re-estimated states is the inverse of the normal matrix, decoupled from the rest.
+void reset_payload(TrackerVector& theta, TrackerMatrix& P, const TrackerMatrix& I, const TrackerVector& b,
+                   const Vector2& reset_var, const Eigen::Matrix<double, 9, 1>& n_rows, double young,
+                   double bias_var) noexcept {
+  bool sel[NS];
+  sel[0] = true;
+  sel[1] = true;
+  for (int j = 2; j < NS; ++j) sel[j] = I(j, j) > 0.0 && n_rows[j - 2] < young;
+  double A[NS][NS] = {};
+  double r[NS] = {};
+  for (int p = 0; p < NS; ++p) {
+    if (!sel[p]) {
+      A[p][p] = 1.0;
+      continue;
+    }
+    const double prior = 1.0 / (p < 2 ? reset_var[p] : bias_var);
+    r[p] = theta[p] * prior + b[p];
+    for (int q = 0; q < NS; ++q) {
+      if (sel[q]) {
+        A[p][q] = I(p, q);
+      } else {
+        r[p] -= I(p, q) * theta[q];
+      }
+    }
+    A[p][p] += prior;
+  }
+  double Ainv[NS][NS];
+  inverse_spd(A, Ainv);
+  double x[NS];
+  for (int p = 0; p < NS; ++p) {
+    double a = 0.0;
+    for (int q = 0; q < NS; ++q) a += Ainv[p][q] * r[q];
+    x[p] = a;
+  }
+  for (int p = 0; p < NS; ++p) {
+    if (!sel[p]) continue;
+    theta[p] = x[p];
+    for (int q = 0; q < NS; ++q) {
+      P(p, q) = 0.0;
+      P(q, p) = 0.0;
+    }
+  }
+  for (int p = 0; p < NS; ++p) {
+    if (!sel[p]) continue;
+    for (int q = 0; q < NS; ++q) {
+      if (sel[q]) P(p, q) = Ainv[p][q];
+    }
+  }
 }
 
 }  // namespace
@@ -93,6 +160,7 @@ Status PayloadTracker::create(const Vector2& nominal, const Vector2& nominal_std
     t.reset_var_[i] = prior * prior;
   }
   t.q_b_ = s.bias_walk * s.bias_walk;
+  t.bias_var_ = s.bias_std * s.bias_std;
   // TrackerState.initial
   State& st = t.state_;
   st.theta.setZero();
@@ -172,6 +240,7 @@ Status PayloadTracker::update(const TrackerRow& row, TrackerOutput& out) noexcep
   for (int p = 0; p < NS; ++p) fPf += f[p] * Pf[p];
   out.nis = r * r / (fPf + r_c);
   const bool warm = st.n_rows[c - 1] >= static_cast<double>(settings_.warm_rows);
+  const bool tested = warm && excited[cls == 2 ? 1 : 0];  // this row's own CUSUMs run on it
   double gmax = 0.0;
   for (int i = 0; i < 2; ++i) {
     for (int s = 0; s < 2; ++s) {
@@ -187,8 +256,8 @@ Status PayloadTracker::update(const TrackerRow& row, TrackerOutput& out) noexcep
           st.bw[w].setZero();
         }
         st.g[w] = std::max(next, 0.0);
+        if (st.g[w] > kRestart) add_row(st.Iw[w], st.bw[w], f, z, 1.0 / r_eff);  // the rows its CUSUM ran on
       }
-      if (st.g[w] > kRestart) add_row(st.Iw[w], st.bw[w], f, z, 1.0 / r_eff);
       gmax = std::max(gmax, st.g[w]);
     }
   }
@@ -200,7 +269,7 @@ Status PayloadTracker::update(const TrackerRow& row, TrackerOutput& out) noexcep
   }
   joseph(st.P, K, f, r_eff);
   for (int p = 0; p < NS; ++p) st.theta[p] += K[p] * r;
-  if (gmax < 0.5 * settings_.threshold) {  // the noise level, frozen while a change builds up
+  if (tested && gmax < 0.5 * settings_.threshold) {  // the noise: from rows the detector tests, frozen while a change builds up
     const double lam = std::max(1.0 / (st.n_rows[6 + cls] + 1.0), dt_ / settings_.noise_time);
     st.R[cls] += lam * (r * r - st.R[cls]);
   }
@@ -212,16 +281,17 @@ Status PayloadTracker::update(const TrackerRow& row, TrackerOutput& out) noexcep
   return Status::ok;
 }
 
-// _kernels._detect: a CUSUM above the threshold resets its parameter; then every CUSUM restarts.
+// _kernels._detect: CUSUMs above the threshold are a payload change: m_ch and C_ch reset from the window
+// of the highest of them, one event per parameter whose CUSUM fired; then every CUSUM restarts.
 void PayloadTracker::detect(TrackerOutput& out) noexcept {
   State& st = state_;
   const std::int64_t n = st.sample - 1;
-  bool fired = false;
+  int best = -1;
   for (int i = 0; i < 2; ++i) {
     const int s = st.g[2 * i] >= st.g[2 * i + 1] ? 0 : 1;
     const int w = 2 * i + s;
     if (st.g[w] <= settings_.threshold) continue;
-    fired = true;
+    if (best < 0 || st.g[w] > st.g[best]) best = w;
     TrackerEvent& e = out.events[static_cast<std::size_t>(out.n_events++)];
     e.parameter = i;
     e.sign = s == 0 ? 1 : -1;
@@ -229,18 +299,21 @@ void PayloadTracker::detect(TrackerOutput& out) noexcept {
     e.start = st.start[w];
     e.before = st.theta[i];
     e.before_var = st.P(i, i);
-    reset(i, st.theta, st.P, st.Iw[w], st.bw[w], reset_var_[i]);
-    e.after = st.theta[i];
-    e.after_var = st.P(i, i);
     ++event_count_;
     out.event |= 1 << i;
   }
-  if (fired) {
-    st.g.fill(0.0);
-    for (int w = 0; w < 4; ++w) {
-      st.Iw[w].setZero();
-      st.bw[w].setZero();
-    }
+  if (best < 0) return;
+  reset_payload(st.theta, st.P, st.Iw[best], st.bw[best], reset_var_, st.n_rows,
+                kYoungWarmups * static_cast<double>(settings_.warm_rows), bias_var_);
+  for (int m = 0; m < out.n_events; ++m) {
+    TrackerEvent& e = out.events[static_cast<std::size_t>(m)];
+    e.after = st.theta[e.parameter];
+    e.after_var = st.P(e.parameter, e.parameter);
+  }
+  st.g.fill(0.0);
+  for (int w = 0; w < 4; ++w) {
+    st.Iw[w].setZero();
+    st.bw[w].setZero();
   }
 }
 

@@ -269,3 +269,41 @@ TEST(Tracker, InitialStateAndStateRoundTrip) {
   EXPECT_EQ(a.state().P, b.state().P);
   EXPECT_STREQ(ff::label(ff::RowKind::gamma_minus), "gamma_ch-");
 }
+
+// A pick-up changes m_ch and C_ch together: an m_ch alarm from straight rows (no C_ch information in
+// its window) keeps C_ch's value with the reset variance (reset_std C_ch)^2; the noise estimate learns
+// nothing while the kind warms up. White rows: threshold 12 (Page's CUSUM alarms every ~e^h white rows).
+TEST(Tracker, AChangeResetsBothPayloadParameters) {
+  ff::TrackerSettings s;
+  s.correlation = 1.0;
+  s.rotation_correlation = 1.0;
+  s.threshold = 12.0;
+  const ff::Vector2 nominal(842.0, 286.0);
+  ff::PayloadTracker tracker;
+  ASSERT_EQ(ff::PayloadTracker::create(nominal, ff::Vector2::Zero(), 0.002, s, &tracker), ff::Status::ok);
+  ff::TrackerOutput out;
+  for (int k = 0; k < s.warm_rows; ++k) {  // warm-up: the noise keeps its prior
+    const double phi = 0.4 * std::sin(0.0157 * k);
+    tracker.update(ff::TrackerRow{ff::RowKind::x_plus, phi, 0.0, phi * 842.0 + 7.0 + 1.5 * std::sin(2.1 * k)}, out);
+  }
+  EXPECT_EQ(tracker.state().R[0], s.noise);
+  int fired = -1;
+  for (int k = s.warm_rows; k < 20000 && fired < 0; ++k) {
+    const double phi = 0.4 * std::sin(0.0157 * k);
+    const double m = k < 6000 ? 842.0 : 1094.6;  // +30 % at row 6000
+    const double C_before = tracker.estimate()[1];
+    tracker.update(ff::TrackerRow{ff::RowKind::x_plus, phi, 0.0, phi * m + 7.0 + 1.5 * std::sin(2.1 * k)}, out);
+    if (out.event != 0) {
+      fired = k;
+      EXPECT_EQ(out.n_events, 1);
+      EXPECT_EQ(out.events[0].parameter, 0);
+      EXPECT_EQ(out.events[0].sign, 1);
+      EXPECT_GE(out.events[0].start, 6000 - 500);
+      EXPECT_NEAR(out.estimate[0] / 1094.6, 1.0, 0.05);
+      EXPECT_NEAR(out.estimate[1], C_before, 1e-9 * C_before);
+      EXPECT_NEAR(out.std[1], s.reset_std * nominal[1], 1e-9 * nominal[1]);
+    }
+  }
+  ASSERT_GT(fired, 6000);
+  EXPECT_LT(fired, 6500);
+}

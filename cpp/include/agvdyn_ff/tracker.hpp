@@ -10,10 +10,11 @@
 //
 // Per row: a Kalman filter with a random walk over (m_ch, C_ch, six row biases), information
 // gating (a parameter learns, and its covariance grows, only from rows that excite it), a
-// directional (Schmidt-type) update in Joseph form, the residual noise estimated online, residual
-// correlation in the row weight; four CUSUMs (m_ch from translation rows, C_ch from rotation rows,
-// both signs) whose alarm resets the changed parameter's covariance and re-estimates it from the
-// rows since the CUSUM's start (PX4-style).
+// directional (Schmidt-type) update in Joseph form, the residual noise estimated online from the rows
+// the detector tests, residual correlation in the row weight; four CUSUMs (m_ch from translation
+// rows, C_ch from rotation rows, both signs) whose alarm is a payload change: m_ch, C_ch and the row
+// biases learnt from few rows are re-estimated together from the rows since the CUSUM's start, with
+// fresh priors (PX4-style covariance reset).
 //
 // create() checks the settings once; update() is the per-sample call: fixed-size Eigen types, no
 // heap allocation, no exceptions, a Status for invalid input. The arithmetic follows the Python
@@ -49,12 +50,12 @@ struct TrackerSettings {
   double gate = 1.0;                   ///< excited when |phi_i| delta_i >= gate sqrt(R)
   double correlation = 150.0;          ///< n_corr of translation rows (samples)
   double rotation_correlation = 300.0; ///< n_corr of rotation rows (samples)
-  double threshold = 12.0;             ///< h: CUSUM alarm level
+  double threshold = 8.0;              ///< h: CUSUM alarm level
   double random_walk = 1e-3;           ///< q = (random_walk x value)^2 per s
   double bias_walk = 0.3;              ///< q_b = bias_walk^2 per s (N or N m)
   double reset_std = 0.5;              ///< variance after a reset (prior): (reset_std x value)^2; cap of P_ii
   double noise_time = 30.0;            ///< tau_R (s) of the noise estimate
-  int warm_rows = 500;                 ///< rows of a kind before its CUSUMs run
+  int warm_rows = 250;                 ///< rows of a kind before its CUSUMs run (and its rows teach the noise)
   double initial_std = 0.02;           ///< least initial std, x value
   double bias_std = 30.0;              ///< initial std of the row biases
   double noise = 25.0;                 ///< initial residual variance R
@@ -151,6 +152,7 @@ class PayloadTracker {
   Vector2 q_ = Vector2::Zero();          // (random_walk x nominal)^2 dt
   Vector2 reset_var_ = Vector2::Zero();  // (reset_std x nominal)^2
   double q_b_ = 0;                       // bias_walk^2
+  double bias_var_ = 0;                  // bias_std^2: a young row bias's variance after a reset
   std::int64_t event_count_ = 0;
 };
 

@@ -328,6 +328,8 @@ def report(
                                         "from: the report shows its floor, the planned and driven paths, cond and "
                                         "predicted std; default: the plan a simulated log's sidecar names, found "
                                         "next to the log or in the working directory."),
+    track: bool = typer.Option(False, "--track", help="Also track m_ch, C_ch over the logs (agvdyn track)."),
+    tracking: Optional[Path] = typer.Option(None, "--tracking", help="Show this agvdyn track --out table."),
     platform: PlatformOpt = None,
     fix: FixOpt = None,
     mapping: MappingOpt = None,
@@ -351,7 +353,7 @@ def report(
     as_json: JsonOpt = False,
 ) -> None:
     """Identify, validate and write one self-contained HTML report: verdict, data quality, excitation plan
-    (when there is one), parameters, correlation, residuals, Fig. 5, Fig. 6 and provenance.
+    (when there is one), parameters, correlation, residuals, Fig. 5, Fig. 6, tracking and provenance.
 
     Exit codes: 0 identified (with or without warnings), 1 refused (the report says why), 2 bad input.
     """
@@ -360,7 +362,8 @@ def report(
     outputs = {"--out": out, "--params-out": params_out}
     kinds = {"--out": "HTML report", "--params-out": "parameter file"}
     refuse_overwrite(outputs, {**log_inputs("--ident", ident_logs), **log_inputs("--validation", [validation]),
-                               "--reference": reference, "--plan": plan, "--platform": platform, "--mapping": mapping},
+                               "--reference": reference, "--plan": plan, "--platform": platform, "--mapping": mapping,
+                               "--tracking": tracking},
                      kinds)
     fixed = _fixed(fix)
     settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
@@ -379,12 +382,12 @@ def report(
         plan_file = None if plan is None else read_plan(plan, geometry)
     except ValueError as exc:
         raise fail(f"--plan: {exc}") from exc
-    extra = {role: path for role, path in (("mapping", mapping), ("platform", platform), ("reference", reference))
-             if path is not None}
+    extra = {role: path for role, path in (("mapping", mapping), ("platform", platform), ("reference", reference),
+                                           ("tracking", tracking)) if path is not None}
     try:
         rep = make_report(loaded, geometry, fixed=fixed, settings=settings, validation_log=val_log, reference=ref,
-                          extra_files=extra, command=command_line(), plan=plan_file)
-    except ValueError as exc:
+                          extra_files=extra, command=command_line(), plan=plan_file, track=track, tracking=tracking)
+    except (ValueError, OSError) as exc:
         raise fail(str(exc)) from exc
     if rep.plan is not None and rep.plan.found == "sidecar":  # found only now, by the logs' sidecars
         refuse_overwrite(outputs, {"plan file named by a log's sidecar": rep.plan.file.path}, kinds)

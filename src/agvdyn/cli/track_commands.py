@@ -21,8 +21,8 @@ def track(
     platform: Optional[Path] = typer.Option(None, help="Platform file (YAML); default: the parameter file's, "
                                             "else the built-in prototype."),
     rate: float = typer.Option(10.0, "--rate", help="Rows of the table per second (decimated; events kept)."),
-    threshold: float = typer.Option(12.0, "--threshold", help="CUSUM threshold of the change detection "
-                                    "(larger: fewer false alarms, later detection)."),
+    threshold: float = typer.Option(8.0, "--threshold", help="CUSUM threshold of the change detection "
+                                    "(larger: fewer false alarms, later detection)."),  # TrackerSettings.threshold
     as_json: bool = typer.Option(False, "--json", help="Print events and final estimates as JSON."),
     engine: str = typer.Option("python", "--engine", metavar="python|cpp", help="The tracker's update: python "
                                "(the reference, numba) or cpp (agvdyn_ff::PayloadTracker through agvdyn.ffcpp; "

@@ -36,6 +36,7 @@ from agvdyn.preflight import Preflight, preflight
 from agvdyn.report.model import ReportContents, contents_of
 from agvdyn.report.plan import ExcitationPlan, PlanFile, excitation_plan
 from agvdyn.report.reference import Reference, choose_reference, parameter_table
+from agvdyn.report.track_section import tracking_section
 
 __all__ = ["Outcome", "Verdict", "InputFile", "Provenance", "Report", "make_report", "report_of", "verdict_of",
            "input_file", "command_line", "MAX_VALIDATION_NRMSE"]
@@ -141,6 +142,7 @@ class Report:
     plan: ExcitationPlan | None = None
     plan_notes: tuple[str, ...] = ()
     contents: ReportContents | None = None
+    tracking: Any = None  # agvdyn.report.track_section.TrackSection: the "Payload tracking" section (issue 31)
 
     def __post_init__(self) -> None:
         if self.contents is None:  # every number and figure input, computed once here
@@ -296,8 +298,8 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
                 settings: IdentificationSettings = IdentificationSettings(), validation_log: Any = None,
                 reference: Reference | None = None, extra_files: Mapping[str, str | os.PathLike] | None = None,
                 command: str | None = None, max_nrmse: float = MAX_VALIDATION_NRMSE,
-                title: str = "agvdyn identification report", plan: PlanFile | str | os.PathLike | None = None
-                ) -> Report:
+                title: str = "agvdyn identification report", plan: PlanFile | str | os.PathLike | None = None,
+                track: bool = False, tracking: Any = None) -> Report:
     """Pre-flight, identify, validate and judge: the contents of the report.
 
     Parameters
@@ -312,6 +314,10 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
     command : the command line, for the provenance.
     plan : the plan file the logs were driven from (:func:`agvdyn.report.plan.read_plan`); None:
         the one a simulated log's sidecar leads to, if any (:func:`agvdyn.report.plan.plan_of_logs`).
+    track : also replay the logs through the payload tracker with the identified parameters
+        (:func:`agvdyn.online.track`) and show m_ch, C_ch over time with the detected changes.
+    tracking : a tracking result to show instead: a :class:`~agvdyn.online.TrackResult`, or the
+        path of a table ``agvdyn track --out`` wrote (:func:`agvdyn.report.track_section.read_track_table`).
 
     A refusal (:class:`UnidentifiableError`, :class:`ImplausibleError`) gives a report with the
     verdict ``refused``; other errors (bad input) propagate.
@@ -336,7 +342,7 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
     prov = _provenance(logs, [] if validation_log is None else [validation_log], geometry,
                        _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(rows), title,
-                  excitation, plan_notes)
+                  excitation, plan_notes, tracking=tracking_section(logs, geometry, ident, track, tracking))
 
 
 def _plan(logs: Sequence[Any], geometry: Geometry, plan: PlanFile | str | os.PathLike | None,
@@ -354,11 +360,12 @@ def report_of(identification: Identification, validation: Any = None, *, referen
               logs: Sequence[Any] = (), validation_logs: Sequence[Any] = (), checked: Preflight | None = None,
               extra_files: Mapping[str, str | os.PathLike] | None = None, command: str | None = None,
               title: str = "agvdyn identification report", max_nrmse: float = MAX_VALIDATION_NRMSE,
-              plan: PlanFile | str | os.PathLike | None = None) -> Report:
+              plan: PlanFile | str | os.PathLike | None = None, track: bool = False, tracking: Any = None) -> Report:
     """A report of results computed elsewhere (Python API, ``make demo``): the verdict from them; the
     data-quality section only when the identification ``logs`` (loaded) or a pre-flight ``checked``
-    are given; ``reference`` None: no comparison (see :func:`choose_reference`); ``plan`` as
-    :func:`make_report` (found by the sidecars of ``logs`` when None)."""
+    are given; ``reference`` None: no comparison (see :func:`choose_reference`); ``plan``, ``track``
+    (with ``logs``) and ``tracking`` as :func:`make_report` (``plan`` found by the sidecars of ``logs``
+    when None)."""
     geometry, settings = identification.geometry, identification.settings
     fixed = {n: getattr(identification.parameters, n) for n in identification.fixed}
     logs = list(logs)
@@ -374,7 +381,8 @@ def report_of(identification: Identification, validation: Any = None, *, referen
         extra.setdefault("plan", excitation.file.path)
     prov = _provenance(logs, validation_logs, geometry, _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, identification, None, validation, checked, reference,
-                  _cuts([f.rows for f in checked.files]) if logs else (), title, excitation, plan_notes)
+                  _cuts([f.rows for f in checked.files]) if logs else (), title, excitation, plan_notes,
+                  tracking=tracking_section(logs, geometry, identification, track, tracking))
 
 
 def command_line() -> str:

@@ -19,6 +19,7 @@ from agvdyn.report._format import yes_no
 from agvdyn.report.assemble import Outcome, Report, report_of
 from agvdyn.report.plan_section import plan_html
 from agvdyn.report.reference import Reference
+from agvdyn.report.track_section import track_html
 
 __all__ = ["figure_png", "report_html", "write_report"]
 
@@ -61,7 +62,7 @@ pre { white-space: pre-wrap; background: #f6f7f8; padding: 10px; border-radius: 
 _SECTIONS = (("verdict", "Verdict"), ("data-quality", "Data quality"), ("plan", "Excitation plan"),
              ("parameters", "Parameters"),
              ("correlation", "Correlation"), ("residuals", "Residuals"), ("fit", "Fit (Fig. 5)"),
-             ("validation", "Validation (Fig. 6)"), ("provenance", "Provenance"))
+             ("validation", "Validation (Fig. 6)"), ("tracking", "Payload tracking"), ("provenance", "Provenance"))
 
 
 def _verdict(report: Report) -> str:
@@ -272,7 +273,7 @@ def report_html(report: Report) -> str:
     title = esc(report.title)
     sections = [_quality(report), plan_html(report.contents.plan),
                 _parameters(report), _correlation(report), _residuals(report), _fit(report), _validation(report),
-                _provenance(report)]
+                track_html(report.tracking), _provenance(report)]
     html_all = "".join(sections)
     nav = "".join(f'<a href="#{k}">{v}</a>' for k, v in _SECTIONS if k == "verdict" or f'id="{k}"' in html_all)
     head = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
