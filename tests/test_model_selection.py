@@ -347,6 +347,35 @@ def test_auto_keeps_the_paper_model_on_an_effect_free_log(effect_free_selection)
     assert set(com.undetermined) >= {"x_c", "y_c"} and not com.usable
 
 
+def test_report_shows_the_comparison_and_the_choice(effect_free_selection):
+    """The report's "Model" section: every candidate with its scores, the chosen one marked, refusals and
+    undetermined parameters named; its JSON has no infinity (null)."""
+    import json
+
+    from agvdyn.report import report_html, report_of
+
+    _, selection = effect_free_selection
+    report = report_of(selection.identification, selection=selection)
+    page = report_html(report)
+    assert '<section id="models">' in page and 'href="#models"' in page
+    for score in selection.scores:
+        assert f"<td>{score.label}</td>" in page
+    assert page.count('class="chosen"') == 1 and "The data chose <b>paper</b>" in page
+    assert "undetermined: x_c, y_c" in page
+    data = json.loads(json.dumps(report.to_json_dict(), allow_nan=False))
+    assert data["models"]["chosen"] == "paper" and len(data["models"]["rows"]) == len(selection.scores)
+    assert [r["chosen"] for r in data["models"]["rows"]] == [s.chosen for s in selection.scores]
+
+
+def test_report_refuses_an_unknown_models_choice(effect_free_selection):
+    from agvdyn.platform import PROTOTYPE
+    from agvdyn.report import make_report
+
+    log, _ = effect_free_selection
+    with pytest.raises(ValueError, match="models='auto'.*paper.*compare"):
+        make_report([log], PROTOTYPE, models="auto")
+
+
 # --- the command line ------------------------------------------------------------------------------------------
 
 def test_cli_defaults_equal_the_model_spec():

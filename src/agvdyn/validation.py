@@ -42,7 +42,7 @@ from agvdyn.model_file import read_model_parameters
 from agvdyn.model_spec import STRIBECK_NAMES, ModelParameters, ModelSpec
 from agvdyn.platform import Geometry, ParameterFile, Parameters
 
-__all__ = ["Validation", "validate", "nrmse"]
+__all__ = ["Validation", "validate", "nrmse", "validation_score"]
 
 
 def nrmse(measured: np.ndarray, model: np.ndarray) -> float:
@@ -217,3 +217,15 @@ def write_validation(path: str | os.PathLike, validation: Validation) -> Path:
     from agvdyn._files import write_text_atomically
 
     return write_text_atomically(path, json.dumps(validation.to_json_dict(), indent=2))
+
+
+def validation_score(log: Any, identification: Any, settings: IdentificationSettings = IdentificationSettings()
+                     ) -> float:
+    """The score of an identification on a log it did not use (lower is better): the mean over
+    coordinates of :func:`validate`'s NRMSE without stiction rows (``nrmse_moving``, the rows the fit
+    models), with the identification's model (its extensions too); nan when no coordinate has one.
+    What :func:`agvdyn.identification.compare_models` takes as ``validation``."""
+    model = getattr(identification, "model_parameters", identification.parameters)
+    values = [v for v in validate(log, model, identification.geometry, settings=settings).nrmse_moving.values()
+              if math.isfinite(v)]
+    return float(sum(values) / len(values)) if values else math.nan

@@ -7,6 +7,7 @@ from agvdyn.cli._app import app
 from agvdyn.cli import model_commands  # noqa: E402,F401
 from agvdyn.cli import io_commands  # noqa: E402,F401
 from agvdyn.cli import identify_commands  # noqa: E402,F401
+from agvdyn.cli import report_commands  # noqa: E402,F401
 from agvdyn.cli import sim_commands  # noqa: E402,F401
 from agvdyn.cli import inspect_command  # noqa: E402,F401
 from agvdyn.cli import study_commands  # noqa: E402,F401

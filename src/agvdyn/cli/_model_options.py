@@ -88,20 +88,13 @@ def validation_score(path: Optional[Path], mapping: Optional[Path], platform: Op
     if path is None:
         return None
     from agvdyn.identification import load_logs
-    from agvdyn.validation import validate
+    from agvdyn.validation import validation_score as score_on
 
     try:
         (log,) = load_logs([path], mapping=mapping, platform=platform)
     except (ValueError, OSError) as exc:
         raise fail(f"--validation: {exc}") from exc
-
-    def score(ident) -> float:
-        model = getattr(ident, "model_parameters", ident.parameters)  # the extensions too (validate predicts with them)
-        values = [v for v in validate(log, model, ident.geometry, settings=settings).nrmse_moving.values()
-                  if math.isfinite(v)]
-        return float(sum(values) / len(values)) if values else math.nan
-
-    return score
+    return functools.partial(score_on, log, settings=settings)
 
 
 def search_of(model: str, compare: bool, delay_range: Optional[str], stribeck_range: Optional[str],

@@ -8,6 +8,7 @@ verdict is ``refused`` and says why.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import hashlib
 import math
 import os
@@ -34,6 +35,7 @@ from agvdyn.io.log import sidecar_path
 from agvdyn.platform import PARAMETER_UNITS, Geometry
 from agvdyn.preflight import Preflight, preflight
 from agvdyn.report.model import ReportContents, contents_of
+from agvdyn.report.model_section import REPORT_MODELS, model_section
 from agvdyn.report.plan import ExcitationPlan, PlanFile, excitation_plan
 from agvdyn.report.reference import Reference, choose_reference, parameter_table
 from agvdyn.report.track_section import tracking_section
@@ -143,6 +145,7 @@ class Report:
     plan_notes: tuple[str, ...] = ()
     contents: ReportContents | None = None
     tracking: Any = None  # agvdyn.report.track_section.TrackSection: the "Payload tracking" section (issue 31)
+    models: Any = None  # agvdyn.report.model_section.ModelSection: the "Model" section (issue 30)
 
     def __post_init__(self) -> None:
         if self.contents is None:  # every number and figure input, computed once here
@@ -162,6 +165,8 @@ class Report:
         out["refusal"] = None if self.refusal is None else str(self.refusal)
         out["provenance"] = self.provenance.to_dict()
         out["plan"] = None if self.plan is None else self.plan.to_dict()
+        if self.models is not None:
+            out["models"] = self.models.to_dict()
         return out
 
 
@@ -299,7 +304,7 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
                 reference: Reference | None = None, extra_files: Mapping[str, str | os.PathLike] | None = None,
                 command: str | None = None, max_nrmse: float = MAX_VALIDATION_NRMSE,
                 title: str = "agvdyn identification report", plan: PlanFile | str | os.PathLike | None = None,
-                track: bool = False, tracking: Any = None) -> Report:
+                track: bool = False, tracking: Any = None, models: str = "paper") -> Report:
     """Pre-flight, identify, validate and judge: the contents of the report.
 
     Parameters
@@ -318,21 +323,21 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
         (:func:`agvdyn.online.track`) and show m_ch, C_ch over time with the detected changes.
     tracking : a tracking result to show instead: a :class:`~agvdyn.online.TrackResult`, or the
         path of a table ``agvdyn track --out`` wrote (:func:`agvdyn.report.track_section.read_track_table`).
+    models : ``"paper"`` (the paper's model) or ``"compare"``: the paper's model and its extensions
+        compared (:func:`agvdyn.identification.compare_models`, scored also on ``validation_log``), the
+        report's identification the chosen one's, the "Model" section the comparison (issue 30).
 
     A refusal (:class:`UnidentifiableError`, :class:`ImplausibleError`) gives a report with the
     verdict ``refused``; other errors (bad input) propagate.
     """
     from agvdyn.validation import validate
 
-    ident, refusal, val = None, None, None
+    val = None
     rows = row_passes(logs, geometry, settings)  # the row pass of each log, once: identify, pre-flight, cuts
-    try:
-        ident = identify(logs, geometry, fixed=fixed, settings=settings, rows=rows)
-    except (UnidentifiableError, ImplausibleError) as exc:
-        refusal = exc
+    ident, refusal, compared = _identified(logs, geometry, fixed, settings, rows, models, validation_log)
     checked = preflight(logs, geometry, fixed=fixed, settings=settings, rows=rows)
     if ident is not None and validation_log is not None:
-        val = validate(validation_log, ident.parameters, geometry, settings=settings)
+        val = validate(validation_log, ident.model_parameters, geometry, settings=settings)
     ref = choose_reference(logs, geometry, reference)
     verdict = verdict_of(ident, refusal, val, ref, checked, max_nrmse=max_nrmse)
     excitation, plan_notes = _plan(logs, geometry, plan, ident, ref)
@@ -342,7 +347,27 @@ def make_report(logs: Sequence[Any], geometry: Geometry, *, fixed: Mapping[str, 
     prov = _provenance(logs, [] if validation_log is None else [validation_log], geometry,
                        _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, ident, refusal, val, checked, ref, _cuts(rows), title,
-                  excitation, plan_notes, tracking=tracking_section(logs, geometry, ident, track, tracking))
+                  excitation, plan_notes, tracking=tracking_section(logs, geometry, ident, track, tracking),
+                  models=compared)
+
+
+def _identified(logs: Sequence[Any], geometry: Geometry, fixed: Mapping[str, float], settings: IdentificationSettings,
+                rows: Sequence[LogRows], models: str, validation_log: Any) -> tuple[Any, Exception | None, Any]:
+    """``(identification, refusal, model section)``: the paper's model on the row passes, or with
+    ``models="compare"`` the comparison of :func:`agvdyn.identification.compare_models` and its choice."""
+    if models not in REPORT_MODELS:
+        raise ValueError(f"models={models!r}: expected one of {REPORT_MODELS}")
+    try:
+        if models == "paper":
+            return identify(logs, geometry, fixed=fixed, settings=settings, rows=rows), None, None
+        from agvdyn.identification import compare_models
+        from agvdyn.validation import validation_score
+
+        score = None if validation_log is None else functools.partial(validation_score, validation_log, settings=settings)
+        selection = compare_models(list(logs), geometry, fixed=fixed, settings=settings, validation=score)
+        return selection.identification, None, model_section(selection)
+    except (UnidentifiableError, ImplausibleError) as exc:
+        return None, exc, None
 
 
 def _plan(logs: Sequence[Any], geometry: Geometry, plan: PlanFile | str | os.PathLike | None,
@@ -360,12 +385,13 @@ def report_of(identification: Identification, validation: Any = None, *, referen
               logs: Sequence[Any] = (), validation_logs: Sequence[Any] = (), checked: Preflight | None = None,
               extra_files: Mapping[str, str | os.PathLike] | None = None, command: str | None = None,
               title: str = "agvdyn identification report", max_nrmse: float = MAX_VALIDATION_NRMSE,
-              plan: PlanFile | str | os.PathLike | None = None, track: bool = False, tracking: Any = None) -> Report:
+              plan: PlanFile | str | os.PathLike | None = None, track: bool = False, tracking: Any = None,
+              selection: Any = None) -> Report:
     """A report of results computed elsewhere (Python API, ``make demo``): the verdict from them; the
     data-quality section only when the identification ``logs`` (loaded) or a pre-flight ``checked``
     are given; ``reference`` None: no comparison (see :func:`choose_reference`); ``plan``, ``track``
     (with ``logs``) and ``tracking`` as :func:`make_report` (``plan`` found by the sidecars of ``logs``
-    when None)."""
+    when None); ``selection``: a :class:`~agvdyn.identification.ModelSelection` for the "Model" section."""
     geometry, settings = identification.geometry, identification.settings
     fixed = {n: getattr(identification.parameters, n) for n in identification.fixed}
     logs = list(logs)
@@ -382,7 +408,8 @@ def report_of(identification: Identification, validation: Any = None, *, referen
     prov = _provenance(logs, validation_logs, geometry, _settings_dict(fixed, settings), extra, command)
     return Report(verdict, prov, geometry, identification, None, validation, checked, reference,
                   _cuts([f.rows for f in checked.files]) if logs else (), title, excitation, plan_notes,
-                  tracking=tracking_section(logs, geometry, identification, track, tracking))
+                  tracking=tracking_section(logs, geometry, identification, track, tracking),
+                  models=None if selection is None else model_section(selection))
 
 
 def command_line() -> str:

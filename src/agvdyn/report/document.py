@@ -19,6 +19,7 @@ from agvdyn.report._format import yes_no
 from agvdyn.report.assemble import Outcome, Report, report_of
 from agvdyn.report.plan_section import plan_html
 from agvdyn.report.reference import Reference
+from agvdyn.report.model_section import model_html
 from agvdyn.report.track_section import track_html
 
 __all__ = ["figure_png", "report_html", "write_report"]
@@ -49,7 +50,7 @@ th, td { border-bottom: 1px solid var(--line); padding: 4px 10px; text-align: ri
 th { background: #f0f2f4; font-weight: 600; border-bottom: 2px solid var(--line); white-space: normal;
      vertical-align: bottom; }
 .l { text-align: left; } td.l { white-space: normal; }
-tr.bad td { background: #fdecea; } tr.fixed td { color: var(--muted); }
+tr.bad td { background: #fdecea; } tr.fixed td { color: var(--muted); } tr.chosen td { background: #eef8f1; }
 .unit { white-space: nowrap; }
 .scroll { overflow-x: auto; }
 figure { margin: 8px 0 18px; } figure img { display: block; max-width: 100%; height: auto; }
@@ -60,7 +61,7 @@ pre { white-space: pre-wrap; background: #f6f7f8; padding: 10px; border-radius: 
 """
 
 _SECTIONS = (("verdict", "Verdict"), ("data-quality", "Data quality"), ("plan", "Excitation plan"),
-             ("parameters", "Parameters"),
+             ("models", "Model"), ("parameters", "Parameters"),
              ("correlation", "Correlation"), ("residuals", "Residuals"), ("fit", "Fit (Fig. 5)"),
              ("validation", "Validation (Fig. 6)"), ("tracking", "Payload tracking"), ("provenance", "Provenance"))
 
@@ -271,7 +272,7 @@ def _provenance(report: Report) -> str:
 def report_html(report: Report) -> str:
     """The report as an HTML string (figures embedded, no script)."""
     title = esc(report.title)
-    sections = [_quality(report), plan_html(report.contents.plan),
+    sections = [_quality(report), plan_html(report.contents.plan), model_html(report.models),
                 _parameters(report), _correlation(report), _residuals(report), _fit(report), _validation(report),
                 track_html(report.tracking), _provenance(report)]
     html_all = "".join(sections)
