@@ -22,7 +22,7 @@ from agvdyn.identification import (
     log_rows,
     row_passes,
 )
-from agvdyn.identification.model_fit import extension_estimates
+from agvdyn.identification.model_fit import MIN_SUPPORT_ROWS, extension_estimates
 from agvdyn.identification.model_rows import delayed_torque
 from agvdyn.identification.regression import stacked_system
 from agvdyn.identification.stretches import filtered_stretch, stretch_bounds
@@ -45,6 +45,8 @@ TRUTH = ModelParameters(P, {"d_sl": 1.3 * P.d_cl, "d_sr": 1.25 * P.d_cr, "d_sw":
                             "w_sr": 0.06, "w_sw": 0.08, "x_c": 0.12, "y_c": -0.08}, spec=BOTH)
 #: unexcited parameters reported (held, unbounded interval) instead of refused
 REPORT = IdentificationSettings.from_flat(unexcited="report")
+#: stiction thresholds below the Stribeck velocities: rows in the Stribeck range are kept
+SLOW_ROWS = IdentificationSettings.from_flat(stiction_threshold=0.005, steering_threshold=0.005)
 WHEELS = ("fl", "rl", "fr", "rr")
 
 
@@ -286,16 +288,34 @@ def test_pipeline_recovers_the_extended_model_from_a_noise_free_log(extended):
 
 def test_breakaway_below_zero_is_refused_and_below_sliding_warned():
     """A breakaway level is a friction: below zero it is refused by name; below the sliding level it is
-    what the data say, with a warning."""
-    levels = {"d_sl": 0.7 * P.d_cl, "d_sr": P.d_cr, "d_sw": P.d_cw, "w_sl": 0.05, "w_sr": 0.06, "w_sw": 0.08}
+    what the data say, with a warning (the wheels: their rows reach into the Stribeck range)."""
+    levels = {"d_sl": P.d_cl, "d_sr": P.d_cr, "d_sw": 0.7 * P.d_cw, "w_sl": 0.05, "w_sr": 0.06, "w_sw": 0.08}
+    log = Log.from_frame(model_frame(ModelParameters(P, levels, spec=STRIBECK))[0])
+    ident = identify(log, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=SLOW_ROWS)
+    assert ident.rows.stribeck_support["w"] >= MIN_SUPPORT_ROWS
+    assert ident.extra["d_sw"] == pytest.approx(0.7 * P.d_cw, rel=1e-4)
+    assert any(w.startswith("d_sw = ") and "below the sliding level d_cw" in w for w in ident.warnings)
+    assert not any(w.startswith(("d_sl = ", "d_sr = ")) for w in ident.warnings)
+    negative = Log.from_frame(model_frame(ModelParameters(P, {**levels, "d_sw": -0.5 * P.d_cw}, spec=STRIBECK))[0])
+    with pytest.raises(ImplausibleError, match="d_sw = "):
+        identify(negative, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=SLOW_ROWS)
+
+
+def test_breakaway_without_rows_in_the_stribeck_range_is_undetermined():
+    """The default stiction thresholds keep no steering row slower than w_s: the steering's breakaway
+    columns hold only the filter's tails (which on stick-slip data fit garbage), so d_sl, d_sr are
+    reported at the paper's law with an unbounded interval and a warning naming them, never a finite
+    number; the wheels, which roll slowly in the chassis motions, keep theirs."""
+    levels = {"d_sl": 1.3 * P.d_cl, "d_sr": 1.3 * P.d_cr, "d_sw": P.d_cw, "w_sl": 0.05, "w_sr": 0.06, "w_sw": 0.08}
     log = Log.from_frame(model_frame(ModelParameters(P, levels, spec=STRIBECK))[0])
     ident = identify(log, PROTOTYPE, model=STRIBECK, keep_blocks=False)
-    assert ident.extra["d_sl"] == pytest.approx(0.7 * P.d_cl, rel=1e-4)
-    assert any(w.startswith("d_sl = ") and "below the sliding level d_cl" in w for w in ident.warnings)
-    assert not any(w.startswith(("d_sr = ", "d_sw = ")) for w in ident.warnings)
-    negative = Log.from_frame(model_frame(ModelParameters(P, {**levels, "d_sr": -0.5 * P.d_cr}, spec=STRIBECK))[0])
-    with pytest.raises(ImplausibleError, match="d_sr = "):
-        identify(negative, PROTOTYPE, model=STRIBECK, keep_blocks=False)
+    support = ident.rows.stribeck_support
+    assert support["l"] < MIN_SUPPORT_ROWS and support["r"] < MIN_SUPPORT_ROWS
+    for name, coulomb in (("d_sl", "d_cl"), ("d_sr", "d_cr")):
+        assert ident.extra_std[name] == math.inf
+        assert ident.extra[name] == getattr(ident.parameters, coulomb)
+        assert any(w.startswith(f"{name} not determined") for w in ident.warnings)
+    assert ident.rows.to_dict()["stribeck_support"] == support
 
 
 # --- (d) the torque delay -----------------------------------------------------------------------------------

@@ -142,10 +142,21 @@ class Filtering(str, Enum):
     terms included) and on the torques, so both sides of the equation see the same filter.
     LITERAL: the paper's wording: filtered angles and derivatives, filtered torques, tanh of
     the filtered velocity, no filtering of the regressor entries themselves.
+    MATCHED: PARALLEL with the torques and the friction entries (functions of once-filtered rates)
+    passed through the angles' filter first, so that every entry of both sides sees the same two
+    filters (the accelerations are derivatives of filtered angles, filtered again; in PARALLEL the
+    torques and the tanh entries pass one filter only), as the online tracker does
+    (:mod:`agvdyn.online.rows`). The same on smooth data; at a steering breakaway the acceleration
+    jumps within ~20 ms, and one filter against two leaves ``C (F a - F F a)``, several N m, on the
+    rows next to every stick phase. With breakaway friction (static 1.3x sliding, 15 logs) MATCHED and
+    ``steering_guard`` 12 bring the mean |error| of C_r from 11 % (largest 27 %) to 1.2 % (4.3 %) and
+    of d_vr from 22 % (48 %) to 3.0 % (7.8 %) (docs/identification.md, "Breakaway friction"); the
+    default stays PARALLEL.
     """
 
     PARALLEL = "parallel"
     LITERAL = "literal"
+    MATCHED = "matched"
 
 
 #: Settings of :class:`RowSettings` that are finite numbers >= 0 (in the order of ``to_dict``'s keys).

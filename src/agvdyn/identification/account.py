@@ -29,11 +29,13 @@ class RowCounts:
     per_mode: dict[str, int] = field(default_factory=dict)
     label_mismatch: dict[str, int] = field(default_factory=dict)
     clipped_stop: dict[str, int] = field(default_factory=dict)
+    #: Stribeck model: used rows of each joint group (l, r, w) within its Stribeck range (.model_rows).
+    stribeck_support: dict[str, int] = field(default_factory=dict)
 
     def add(self, other: "RowCounts") -> None:
         for key in ("samples", "stretches", "edge", "too_short", "no_mode", "not_selected", "slip", "used"):
             setattr(self, key, getattr(self, key) + getattr(other, key))
-        for key in ("per_mode", "label_mismatch", "clipped_stop"):
+        for key in ("per_mode", "label_mismatch", "clipped_stop", "stribeck_support"):
             mine = getattr(self, key)
             for k, v in getattr(other, key).items():
                 mine[k] = mine.get(k, 0) + v
@@ -43,7 +45,8 @@ class RowCounts:
                 "dropped_too_short": self.too_short, "dropped_no_mode": self.no_mode,
                 "dropped_not_selected": self.not_selected, "dropped_slip": self.slip, "used": self.used,
                 "per_mode": dict(self.per_mode), "label_mismatch": dict(self.label_mismatch),
-                "clipped_stop": dict(self.clipped_stop)}
+                "clipped_stop": dict(self.clipped_stop),
+                **({"stribeck_support": dict(self.stribeck_support)} if self.stribeck_support else {})}
 
 
 @dataclass(frozen=True, eq=False)

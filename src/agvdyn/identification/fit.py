@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,6 +43,7 @@ from agvdyn.identification.model_fit import (
     breakaway_warnings,
     extension_estimates,
     hold_unobservable,
+    unsupported_breakaway,
     noisy_extensions,
     residual_sums,
     with_unobservable,
@@ -52,7 +54,7 @@ from agvdyn.identification.regression import Dependency, Estimator, Unidentifiab
 from agvdyn.identification.result import Identification, ParameterCorrelation, UncertaintySummary
 from agvdyn.identification.settings import DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.uncertainty import parameter_uncertainty
-from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, EXTRA_NAMES, PAPER_MODEL, ModelSpec
+from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, EXTRA_NAMES, FRICTION_GROUPS, PAPER_MODEL, ModelSpec
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["fit_blocks", "fit_regression", "normal_equations", "check_fixed", "columns", "Estimate", "FitUncertainty", "estimate",
@@ -137,13 +139,19 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     model = resolved_model(model)
     free = columns(fixed, settings.fit.torque_offsets, model)[1]
     est = estimator if estimator is not None else settings.fit.make_estimator()
+    account = account if account is not None else RowAccount()
     data, free, unseen = hold_unobservable(data, free, model)
     check = with_unobservable(check_excitation(data, free, est, settings), unseen)
     fitted = estimate(check, est, settings)
     unc = fit_uncertainty(check, fitted, settings, workers)
+    unsupported = unsupported_breakaway(model, account.counts.stribeck_support)
+    if unsupported:  # fitted but not determined: unbounded, left out of the plausibility checks
+        check = dataclasses.replace(check, unbounded=check.unbounded | frozenset(unsupported),
+                                    warnings=check.warnings + tuple(unsupported.values()))
+        unc.std.update(dict.fromkeys(unsupported, math.inf))
     warnings = check_plausibility(check, fitted, unc, settings, geometry)
     return assemble(check, fitted, unc, warnings, fixed=fixed, settings=settings, geometry=geometry,
-                    account=account if account is not None else RowAccount(), model=model)
+                    account=account, model=model)
 
 
 @dataclass(frozen=True, eq=False)
@@ -274,6 +282,8 @@ def assemble(check: ExcitationCheck, fitted: Estimate, unc: FitUncertainty, warn
     residual_rms = data.residual_rms(est.coef_)
     extra, extra_std = extension_estimates(model, columns(fixed, settings.fit.torque_offsets, model)[0], theta,
                                            check.free, unc.cov, unc.std)
+    for name in unsupported_breakaway(model, account.counts.stribeck_support):  # at the paper's law, unbounded
+        extra[name] = getattr(parameters, FRICTION_GROUPS[name[-1]][1])
     return Identification(
         parameters=parameters, std=_parameter_std(unc),
         fixed=tuple(n for n in PARAMETER_NAMES if n in fixed),

@@ -28,6 +28,7 @@ from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, FRICTION_GROUPS, ST
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["UNOBSERVABLE", "hold_unobservable", "with_unobservable", "extension_estimates", "breakaway_warnings",
+           "unsupported_breakaway", "MIN_SUPPORT_ROWS",
            "noisy_extensions", "residual_sums", "linear_values"]
 
 
@@ -102,6 +103,33 @@ def linear_values(model: ModelSpec, extra: Mapping[str, float], parameters: Para
     if not model.linear_names:
         return None
     return np.array([extra[n] * parameters.m_ch if n in CENTRE_NAMES else extra[n] for n in model.linear_names])
+
+
+#: Used rows of a joint group within its Stribeck range (:func:`.model_rows.stribeck_support`) below which
+#: its breakaway level is not determined: 1 s at the paper's 2 ms.
+MIN_SUPPORT_ROWS = 500
+
+
+def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[str, str]:
+    """The breakaway levels the rows cannot show, with why: groups with fewer than :data:`MIN_SUPPORT_ROWS`
+    used rows in their Stribeck range (``support``, counted by the row pass; empty: not counted, nothing
+    judged). Their column then holds only the filter's tails of stick phases (a passive steering sticks
+    at every reversal and crosses the range within milliseconds): a number fitted there is not a
+    breakaway level. They are reported at the paper's law (``d_s = d_c``) with an unbounded interval."""
+    if not model.stribeck or not support:
+        return {}
+    out = {}
+    for g, w_s in zip("lrw", model.stribeck_velocities):
+        n = int(support.get(g, 0))
+        if n < MIN_SUPPORT_ROWS:
+            out[f"d_s{g}"] = (f"d_s{g} not determined: {n} used rows of the {_GROUP_NAMES[g]} run in its Stribeck range "
+                              f"(|rate| < {0.83 * w_s:.3g} rad/s, needs {MIN_SUPPORT_ROWS}); its column holds only the "
+                              "filter's tails of stick phases. Reported at the paper's law d_s = d_c, interval unbounded "
+                              "(slow steady motion of that joint would show it)")
+    return out
+
+
+_GROUP_NAMES = {"l": "left steering", "r": "right steering", "w": "wheels"}
 
 
 def breakaway_warnings(extra: Mapping[str, float], extra_std: Mapping[str, float], parameters: Parameters,

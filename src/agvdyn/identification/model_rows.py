@@ -27,11 +27,15 @@ from typing import Any
 import numpy as np
 
 from agvdyn.identification._model_kernels import model_projection
+from agvdyn.kinematics import Mode
 from agvdyn.model_spec import PAPER_MODEL, ModelSpec, breakaway_weight
 
 __all__ = ["resolved_model", "model_channels", "delay_shift", "delayed_torque", "stretch_torque",
-           "fill_model_channels", "model_projection_columns"]
+           "fill_model_channels", "model_projection_columns", "stribeck_support", "SUPPORT_SHARE"]
 
+#: A row supports a joint group's breakaway level where ``e = exp(-(w/w_s)^2)`` of its own rate is above
+#: this share (``|w| < 0.83 w_s``): there the friction is mostly the breakaway excess.
+SUPPORT_SHARE = 0.5
 #: Channels per extension: the six joints' ``e tanh`` (stribeck), ``w^2`` (com_offset).
 STRIBECK_CHANNELS = 6
 COM_CHANNELS = 1
@@ -108,3 +112,27 @@ def model_projection_columns(model: ModelSpec, mode: np.ndarray, av: np.ndarray,
     the breakaway share taken out of the ``d_c`` columns of ``Y``."""
     model_projection(mode, av, runs, count, signals, extra, h_const, dofs, geometry.l, geometry.b, geometry.a,
                      geometry.r, limit, model.stribeck, model.com_offset, Y, X)
+
+
+def stribeck_support(model: ModelSpec, q_dot: np.ndarray, first: int, blocks: Any) -> dict[str, int]:
+    """Per joint group (``l``, ``r``, ``w``) the kept rows of ``blocks`` (a stretch's; ``q_dot`` its once-filtered
+    joint rates, ``first`` its first row in the log) whose own joint rate is in the Stribeck range,
+    ``e(w) > SUPPORT_SHARE``, and moving (a wheel row counts when any wheel does; the steering only in the
+    modes that move it: 1 and 2). Without such rows a group's ``d_s`` column holds only the filter's tails
+    of stick phases (docs/identification.md, "Breakaway friction"): :mod:`.model_fit` then leaves ``d_s``
+    undetermined."""
+    if not model.stribeck:
+        return {}
+    w_s = np.array(model.stribeck_velocities)[[0, 1, 2, 2, 2, 2]]
+    out = {"l": 0, "r": 0, "w": 0}
+    for b in blocks:
+        rates = np.abs(q_dot[b.sample - first, 3:9])
+        inside = (rates > 0) & (breakaway_weight(rates, w_s) > SUPPORT_SHARE)
+        out["w"] += int((inside[:, 2:].any(axis=1) & b.keep.any(axis=1)).sum())
+        if b.mode is Mode.PARKING:  # each side's rows: its own coordinate kept
+            out["l"] += int((inside[:, 0] & b.keep[:, 0]).sum())
+            out["r"] += int((inside[:, 1] & b.keep[:, 1]).sum())
+        elif b.mode is Mode.CAR_LIKE:  # both sides follow the virtual steering angle, the second coordinate
+            out["l"] += int((inside[:, 0] & b.keep[:, 1]).sum())
+            out["r"] += int((inside[:, 1] & b.keep[:, 1]).sum())
+    return out

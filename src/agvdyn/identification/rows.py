@@ -28,7 +28,7 @@ from agvdyn.identification._kernels import stretch_modes, stretch_projection
 from agvdyn.io.schema import SEGMENTS, LazyFrame
 from agvdyn.identification.account import LogRows, RowCounts
 from agvdyn.identification.equations import EquationBlock
-from agvdyn.identification.model_rows import model_projection_columns, resolved_model
+from agvdyn.identification.model_rows import model_projection_columns, resolved_model, stribeck_support
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.identification.slip import slip_rows, slip_threshold
 from agvdyn.identification.stretches import Stretch, filtered_stretch, log_source, min_stretch_rows, stretches_of
@@ -266,8 +266,11 @@ def log_rows(log: Any, geometry: Geometry, settings: IdentificationSettings = Id
             ev = [e for e in ev if t[core.start] <= e.t_start <= t[core.stop - 1]]
         events += ev
         usable = _usable_rows(st, modes[st.rows], drop_slip, labels, settings, own[st.rows], counts)
-        blocks += _stretch_blocks(geometry, st, modes[st.rows], av, usable, labels, settings, f"{source}#{k}",
-                                  own[st.rows], workspace, f"#{k}", model)
+        made = _stretch_blocks(geometry, st, modes[st.rows], av, usable, labels, settings, f"{source}#{k}",
+                               own[st.rows], workspace, f"#{k}", model)
+        for g, c in stribeck_support(model, st.q_dot, st.rows.start, made).items():
+            counts.stribeck_support[g] = counts.stribeck_support.get(g, 0) + c
+        blocks += made
     gaps = tuple((float(t[b - 1]), float(t[c])) for (_, b), (c, _) in zip(bounds[:-1], bounds[1:]))
     present = frozenset() if labels is None else frozenset(_present(labels))
     return LogRows(source, tuple(blocks), counts, tuple(events), threshold, tuple(notes), modes, tuple(cuts), gaps,

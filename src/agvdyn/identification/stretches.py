@@ -5,7 +5,9 @@ steps (a dropout) or an angle step no vehicle can make (two recordings joined, a
 reset). Each stretch is low-passed and differentiated once, as a whole; odometry (eq. 3) and the
 entries of Theta (eq. 16) are computed on the filtered signals, the slip speed of the redundant
 rolling constraints on lighter filtered steering rates and raw wheel rates (``slip_cutoff``), and
-in PARALLEL filtering the entries of Theta and the torques are low-passed once more together.
+in PARALLEL filtering the entries of Theta and the torques are low-passed once more together (in
+MATCHED filtering the torques and the friction entries pass the angles' filter first, so that every
+entry of both sides sees two filters: :func:`matched_prefilter`).
 Segment labels, motion modes, stiction and slip are decided
 afterwards, row by row, on these filtered signals: no filter ever starts or ends at a label.
 """
@@ -28,7 +30,7 @@ from agvdyn.signals import FilterSettings, filter_design, lowpass, uniform_sampl
 from agvdyn.time_base import stamp_interval
 
 __all__ = ["Stretch", "stretch_bounds", "stretches_of", "filtered_stretch", "log_source", "edge_rows", "min_stretch_rows",
-           "torque_lead", "align_torque", "slip_filter"]
+           "torque_lead", "align_torque", "slip_filter", "matched_prefilter", "MATCHED_COLUMNS"]
 
 
 def log_source(log: Any) -> str:
@@ -44,10 +46,10 @@ class Stretch:
     on demand), the chassis ones by odometry (eq. 3), the others derivatives of the filtered
     angles (views: ``alpha_dot``, ``beta_dot``, ``chassis_dot``, ...); ``slip`` (n, 4) slip speed per wheel (m/s);
     ``signals`` (n, 21) entries of Theta (:data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and
-    ``torque`` (n, 4) motor torques, both filtered alike in PARALLEL filtering; ``edge`` (n,)
-    rows within the filter's transient of either end (and, with a torque delay, rows whose shifted
-    torque falls outside the stretch); ``trig`` (n, 4) sin and cos of the left and right steering
-    angle; ``extra`` (n, q) the model extensions' channels (:mod:`.model_rows`; q = 0 for the paper's).
+    ``torque`` (n, 4) motor torques, both filtered alike in PARALLEL filtering (the torques and the
+    friction entries twice in MATCHED); ``edge`` (n,) rows within the filter's transient of either
+    end (and, with a torque delay, rows whose shifted torque falls outside the stretch); ``trig``
+    (n, 4) sin and cos of the left and right steering angle; ``extra`` (n, q) the model extensions' channels (:mod:`.model_rows`; q = 0 for the paper's).
     """
 
     source: str
@@ -172,6 +174,32 @@ def slip_filter(settings: IdentificationSettings, dt: float) -> FilterSettings:
     return FilterSettings(cutoff=min(rules.slip_cutoff, 0.8 * math.pi / dt), order=rules.filter.order)
 
 
+#: Columns of the second filter's buffer that MATCHED filtering low-passes once more first: the six
+#: friction entries ``tanh(q_dot / epsilon)`` (functions of once-filtered rates; the order of
+#: :data:`agvdyn.dynamics.REGRESSOR_SIGNALS`) and the four torques; the model's channels follow them.
+MATCHED_COLUMNS = np.array([5, 8, 17, 18, 19, 20, 21, 22, 23, 24])
+
+
+def matched_prefilter(middle: np.ndarray, design: tuple[np.ndarray, np.ndarray, int],
+                      workspace: Workspace | None = None, tag: str = "") -> None:
+    """MATCHED filtering, in place on the channels (n, 25 + q) of the second filter: the torques, the
+    friction entries and the model's channels through the angles' low-pass ``design`` (sections,
+    initial state, padding) once, so that every entry of both sides of eq. (19) sees two filters.
+
+    The accelerations and rates are derivatives of filtered angles (one filter) and pass the second;
+    a function of a once-filtered rate (``tanh``, ``e tanh``, ``gamma_dot^2``) stands for the function
+    of the rate itself filtered once (exact where the rate changes slowly against the filter), and so
+    needs one more, as the torques do. PARALLEL leaves torques and friction entries at one filter
+    against two for the inertia terms: at a breakaway, where the acceleration jumps, that is
+    ``C (F a - F F a)``, several N m for ~100 ms."""
+    sos, zi, pad = design
+    n = middle.shape[0]
+    columns = np.concatenate([MATCHED_COLUMNS, np.arange(SIGNAL_CHANNELS, middle.shape[1])])
+    buffer = empty(workspace, f"matched{tag}", (n + 2 * pad, columns.size))
+    buffer[pad:pad + n] = middle[:, columns]
+    middle[:, columns] = filtfilt_in_place(sos, zi, buffer, pad)
+
+
 def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settings: IdentificationSettings,
                      workspace: Workspace | None = None, tag: str = "", median_step: float | None = None,
                      model: ModelSpec = PAPER_MODEL) -> Stretch:
@@ -220,7 +248,9 @@ def filtered_stretch(geometry: Geometry, log: Any, start: int, stop: int, settin
                    torque, torque_lead(log, settings), alpha, trig, q_dot, slip, middle, tanh)
     if not model.is_paper:
         fill_model_channels(model, q_dot, tanh, middle[:, SIGNAL_CHANNELS:])
-    if settings.rows.filtering is Filtering.PARALLEL:
+    if settings.rows.filtering is Filtering.MATCHED:
+        matched_prefilter(middle, (sos, zi, pad), workspace, tag)
+    if settings.rows.filtering is not Filtering.LITERAL:  # PARALLEL, MATCHED: the second filter on every channel
         filtfilt_in_place(sos, zi, both, pad)
     else:
         middle[:, 21:SIGNAL_CHANNELS] = lowpass(middle[:, 21:SIGNAL_CHANNELS], dt, settings.rows.filter)
