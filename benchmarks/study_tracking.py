@@ -1,7 +1,11 @@
-"""Study: the payload tracker's acceptance figures (issue 31) on our plant; prints the acceptance table.
+"""Study: the payload tracker's acceptance figures (issue 31) on our plant or MuJoCo; prints the acceptance table.
 
     nice .venv/bin/python benchmarks/study_tracking.py [--seeds 20] [--first-seed 1] [--free-hours 2]
-                                                       [--markdown] [--json runs.json]
+                                                       [--engine ours|mujoco] [--markdown] [--json runs.json]
+
+``--engine mujoco``: the same runs on the MuJoCo plant (the vehicle generated from the prototype and
+Table 2; the load a body welded to the chassis, simulation/mujoco_payload.py); the tracker holds the
+MuJoCo vehicle's lumped parameters (equal to Table 2 to rounding).
 
 1. Step study: ``seeds`` runs of ``driving`` (160 s, seed s) with one centred pick-up of +10..+60 %
    of m_ch (a pallet: yaw inertia ``m (1.2^2 + 0.8^2) / 12``, so C_ch grows by +5..+30 %) at a random
@@ -74,16 +78,16 @@ def step_of_seed(seed: int) -> PayloadEvent:
     return PayloadEvent(float(rng.uniform(40.0, 100.0)), mass, 0.0, 0.0, mass * (PALLET[0] ** 2 + PALLET[1] ** 2) / 12)
 
 
-def simulated_log(traj: Trajectory, payload: tuple[PayloadEvent, ...], seed: int):
-    """The run's log in memory (as read from its file) and the simulation result."""
-    res = simulate(traj, settings=SimulationSettings(payload=payload), seed=seed)
+def simulated_log(traj: Trajectory, payload: tuple[PayloadEvent, ...], seed: int, engine: str = "ours"):
+    """The run's log in memory (as read from its file) and the simulation result (on ``engine``)."""
+    res = simulate(traj, settings=SimulationSettings(payload=payload), seed=seed, engine=engine)
     return Log.from_frame(res.log_frame(), sidecar=res.sidecar()), res
 
 
-def step_case(seed: int) -> Case:
+def step_case(seed: int, engine: str = "ours") -> Case:
     step = step_of_seed(seed)
     traj = experiment("driving", duration=STEP_DURATION, seed=seed)
-    log, res = simulated_log(traj, (step,), seed)
+    log, res = simulated_log(traj, (step,), seed, engine)
     truth = res.payload_truth[0]
     return Case(seed, step, log, traj, truth.t_applied, np.array([truth.m_ch, truth.C_ch]))
 
@@ -160,20 +164,21 @@ def evaluate(case: Case, res: TrackResult, accel: float, yaw_accel: float) -> di
     return out
 
 
-def step_study(seeds: list[int], settings: TrackerSettings, accel: float, yaw_accel: float) -> list[dict]:
+def step_study(seeds: list[int], settings: TrackerSettings, accel: float, yaw_accel: float,
+               engine: str = "ours") -> list[dict]:
     rows = []
     for seed in seeds:
-        case = step_case(seed)
+        case = step_case(seed, engine)
         rows.append(evaluate(case, track([case.log], PROTOTYPE, P, settings=settings), accel, yaw_accel))
     return rows
 
 
-def false_alarm_study(hours: float, settings: TrackerSettings, first_seed: int = 101) -> dict:
+def false_alarm_study(hours: float, settings: TrackerSettings, first_seed: int = 101, engine: str = "ours") -> dict:
     """Alarms on step-free driving: ``hours`` in runs of 600 s (seeds ``first_seed``, ...)."""
     runs = max(1, math.ceil(hours * 3600 / FREE_DURATION))
     alarms, total, where = 0, 0.0, []
     for seed in range(first_seed, first_seed + runs):
-        log, _ = simulated_log(experiment("driving", duration=FREE_DURATION, seed=seed), (), seed)
+        log, _ = simulated_log(experiment("driving", duration=FREE_DURATION, seed=seed), (), seed, engine)
         res = track([log], PROTOTYPE, P, settings=settings)
         alarms += len(res.events)
         where += [(seed, e.parameter, round(e.t_detected, 2)) for e in res.events]
@@ -242,14 +247,16 @@ def main() -> None:
     ap.add_argument("--free-hours", type=float, default=2.0, help="step-free driving (0: skip)")
     ap.add_argument("--accel", type=float, default=0.1, help="m/s^2: an excited translation")
     ap.add_argument("--yaw-accel", type=float, default=0.3, help="rad/s^2: an excited rotation")
+    ap.add_argument("--engine", choices=("ours", "mujoco"), default="ours", help="the plant of the runs")
     ap.add_argument("--json", default=None, help="write every run's figures to this file")
     ap.add_argument("--markdown", action="store_true")
     args = ap.parse_args()
     settings = TrackerSettings()
     t0 = time.perf_counter()
-    rows = step_study(list(range(args.first_seed, args.first_seed + args.seeds)), settings, args.accel, args.yaw_accel)
+    rows = step_study(list(range(args.first_seed, args.first_seed + args.seeds)), settings, args.accel, args.yaw_accel,
+                      args.engine)
     t1 = time.perf_counter()
-    free = false_alarm_study(args.free_hours, settings) if args.free_hours > 0 else None
+    free = false_alarm_study(args.free_hours, settings, engine=args.engine) if args.free_hours > 0 else None
     t2 = time.perf_counter()
     for r in rows:
         print(run_line(r))

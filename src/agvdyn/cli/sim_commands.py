@@ -94,8 +94,9 @@ def simulate(
                                         "'agvdyn export') instead; it holds platform and true parameters."),
     payload: Optional[list[str]] = typer.Option(None, "--payload", help="T:MASS[:X,Y[:C]] pick-up of MASS kg at "
                                                 "T s at (X, Y) m in the chassis frame with yaw inertia C kg m^2 "
-                                                "about its centre (negative mass: drop); repeatable; our plant "
-                                                "only; sidecar: payload_truth."),
+                                                "about its centre (negative mass: drop); repeatable; either "
+                                                "engine (MuJoCo: a body welded to the chassis); sidecar: "
+                                                "payload_truth."),
     breakaway: Optional[list[str]] = typer.Option(None, "--breakaway", help="GROUP=RATIO[:W_S] breakaway "
                                                   "friction of joint group l (left steering), r (right "
                                                   "steering), w (wheels) or all: static level RATIO times "

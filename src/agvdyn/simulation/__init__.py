@@ -135,9 +135,7 @@ def simulate(
                   st.energy, out["work"])
 
     truths: list = []
-    if settings.payload:
-        if vehicle is not None:
-            raise ValueError("payload events run on engine='ours' only (the MuJoCo plant has no payload)")
+    if settings.payload and vehicle is None:  # MuJoCo's: mujoco_stepper (mujoco_payload.py)
         from agvdyn.simulation.payload import payload_stepper
 
         step = payload_stepper(step, st.c, st.pos, st.vel, settings.payload, plant_params.m_ch, plant_params.C_ch,
@@ -146,7 +144,7 @@ def simulate(
         from agvdyn.simulation.mujoco_plant import mujoco_stepper
 
         mj_energy = np.zeros((traj.n_samples, 2))
-        step = mujoco_stepper(vehicle, traj, settings, st, burst, patches, mj_energy)  # noqa: F811
+        step = mujoco_stepper(vehicle, traj, settings, st, burst, patches, mj_energy, truths)  # noqa: F811
     run_chunks(traj.name, traj.n_samples, Ts, st, step, progress)
     energy = st.energy
     if vehicle is not None:  # kinetic energy; dissipated work = motor work - change of kinetic + potential energy

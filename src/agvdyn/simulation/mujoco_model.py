@@ -31,6 +31,11 @@ The mapping, per wheel ``i`` (fl, rl, fr, rr) with steering axis ``c_i`` (PLATFO
 do not fix how mass and inertia divide between chassis, units and wheels; the defaults are stated
 there); :func:`lumped_parameters` goes bodies -> lumped, exactly (the yaw terms at alpha = 0, which is
 every alpha for balanced units). :func:`mjcf` writes the MJCF of a vehicle.
+
+Payload (issue 31, :mod:`agvdyn.simulation.payload`): the loads on board are one body ``payload``
+welded to the chassis (no joint), massless until the first event; after each event it carries the
+sums so far ``(m_p, S_x, S_y, J_p)`` (:func:`agvdyn.simulation.mujoco_payload.payload_inertial`). The
+MuJoCo plant adds the body when a run has payload events; the MJCF of :func:`mjcf` never has it.
 """
 from __future__ import annotations
 
@@ -43,7 +48,10 @@ import numpy as np
 from agvdyn.platform import WHEELS, Geometry, Parameters
 
 __all__ = ["BodySplit", "VehicleBodies", "EngineOptions", "vehicle_bodies", "lumped_parameters", "mjcf",
-           "body_names"]
+           "body_names", "PAYLOAD_BODY"]
+
+#: Name of the body welded to the chassis that carries the payload (added only to runs with payload events).
+PAYLOAD_BODY = "payload"
 
 #: Side sign (+1 left, -1 right) and heading sign (+1 front, -1 rear) in wheel order fl, rl, fr, rr.
 _SIDE = (1.0, 1.0, -1.0, -1.0)

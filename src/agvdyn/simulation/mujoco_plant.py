@@ -294,15 +294,25 @@ def _tyre_friction(model, source: str) -> tuple[np.ndarray, np.ndarray, bool]:
 
 
 def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray, patches: np.ndarray,
-                   energy: np.ndarray) -> Callable[[int, int], None]:
+                   energy: np.ndarray, truths: list | None = None) -> Callable[[int, int], None]:
     """``step(k0, k1)`` for :func:`agvdyn.simulation._setup.run_chunks`: samples k0..k1-1 on MuJoCo.
 
     ``st`` is the run's :class:`~agvdyn.simulation._setup.RunState` (plan, noise, controller state,
     outputs; ``st.pos``/``st.vel`` carry the plant state in PLATFORM.md's coordinates). ``energy`` (N, 2)
-    receives MuJoCo's kinetic and potential energy at each sample.
+    receives MuJoCo's kinetic and potential energy at each sample. Payload events
+    (``settings.payload``; mujoco_payload.py) load a body welded to the chassis before their first
+    samples; their :class:`~agvdyn.simulation.payload.PayloadTruth` join ``truths``.
     """
     mujoco = _mujoco()
-    model = vehicle.model()
+    load = None
+    if settings.payload:
+        from agvdyn.simulation.mujoco_payload import MujocoPayload, payload_model
+
+        model = payload_model(vehicle.xml, str(vehicle.source or "generated MJCF"))
+        load = MujocoPayload(model, vehicle.parameters.m_ch, vehicle.parameters.C_ch, settings.payload,
+                             settings.sample_time, energy, [] if truths is None else truths)
+    else:
+        model = vehicle.model()
     data = mujoco.MjData(model)
     Ts = settings.sample_time
     substeps = int(round(Ts / model.opt.timestep))
@@ -324,6 +334,8 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
     ai = np.array([_id(model, "actuator", f"motor_{w}", src) for w in WHEELS], dtype=np.int64)
     contact, friction, pairs = _tyre_friction(model, src)
     base_mu = np.concatenate([friction[contact, 0], friction[contact, 1] if pairs else np.full(4, -1.0)])
+    if load is not None:
+        load.load_at_rest(data)  # events at t = 0: the contacts settle with the load on
     initial_state(model, data, np.asarray(traj.alpha[0], dtype=float))
     st.pos[2] = 0.0
     out = st.out
@@ -345,4 +357,4 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
             if substeps > 1:
                 step_one(model, data, substeps - 1)
 
-    return step
+    return step if load is None else load.stepper(step, data)

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PayloadEvent", "PayloadTruth", "parse_payload", "payload_state", "payload_from_list"]
+__all__ = ["PayloadEvent", "PayloadTruth", "parse_payload", "payload_state", "payload_from_list", "split_at_events"]
 
 
 def _finite(where: str, key: str, value: Any) -> float:
@@ -177,7 +177,6 @@ def payload_stepper(step: Any, c: np.ndarray, pos: np.ndarray, vel: np.ndarray, 
     plan = payload_state(events, m_ch, C_ch, float(c[_MB]), sample_time)
     order = sorted(events, key=lambda e: e.t)
     work = np.zeros((9, 9))
-    done = [0]
 
     def apply(i: int) -> None:
         k, moments, m, C, xc, yc = plan[i]
@@ -186,10 +185,18 @@ def payload_stepper(step: Any, c: np.ndarray, pos: np.ndarray, vel: np.ndarray, 
         jump = kinetic_energy(c, pos, vel, work) - before
         truths.append(PayloadTruth(order[i], k, k * sample_time, float(m), float(C), float(xc), float(yc), float(jump)))
 
+    return split_at_events(step, [p[0] for p in plan], apply)
+
+
+def split_at_events(step: Any, samples: list[int], apply: Any) -> Any:
+    """``step(k0, k1)`` that calls ``apply(i)`` before the first sample ``samples[i]`` of event i (in
+    time order; an event before k0 at the first call applies there) and ``step`` on the samples between."""
+    done = [0]
+
     def stepped(k0: int, k1: int) -> None:
         a = k0
-        while done[0] < len(plan) and plan[done[0]][0] < k1:
-            k = max(plan[done[0]][0], a)
+        while done[0] < len(samples) and samples[done[0]] < k1:
+            k = max(samples[done[0]], a)
             if k > a:
                 step(a, k)
                 a = k
