@@ -8,12 +8,15 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/map.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
 #include <cstdint>
+#include <limits>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -176,17 +179,21 @@ using OutKind = nb::ndarray<std::int64_t, nb::ndim<1>, nb::c_contig, nb::device:
 using Event = std::tuple<std::int64_t, std::int64_t, int, int, double, double, double, double>;
 
 ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<double, double> nominal_std, double dt,
-                                const std::map<std::string, double>& values) {
+                                const std::map<std::string, double>& values, double y_c = 0.0,
+                                double y_c_std = std::numeric_limits<double>::infinity()) {
   ff::TrackerSettings s;
   const std::map<std::string, double*> fields = {
       {"change_size", &s.change_size}, {"gate", &s.gate}, {"correlation", &s.correlation},
       {"rotation_correlation", &s.rotation_correlation}, {"threshold", &s.threshold},
       {"random_walk", &s.random_walk}, {"bias_walk", &s.bias_walk}, {"reset_std", &s.reset_std},
       {"noise_time", &s.noise_time}, {"initial_std", &s.initial_std}, {"bias_std", &s.bias_std},
-      {"noise", &s.noise}};
+      {"noise", &s.noise}, {"offset_change", &s.offset_change}, {"offset_std", &s.offset_std},
+      {"offset_walk", &s.offset_walk}};
   for (const auto& [key, value] : values) {
     if (key == "warm_rows") {
       s.warm_rows = static_cast<int>(value);
+    } else if (key == "com_offset") {
+      s.com_offset = value != 0.0;
     } else if (auto it = fields.find(key); it != fields.end()) {
       *it->second = value;
     } else {
@@ -195,15 +202,16 @@ ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<d
   }
   ff::PayloadTracker tracker;
   const ff::Vector2 n(std::get<0>(nominal), std::get<1>(nominal)), sd(std::get<0>(nominal_std), std::get<1>(nominal_std));
-  if (ff::PayloadTracker::create(n, sd, dt, s, &tracker) != ff::Status::ok) {
+  if (ff::PayloadTracker::create(n, sd, y_c, y_c_std, dt, s, &tracker) != ff::Status::ok) {
     throw std::invalid_argument("agvdyn_ff tracker: invalid_model: expected nominal m_ch, C_ch > 0, stds >= 0, dt > 0, "
                                 "every setting finite and > 0 (warm_rows >= 0)");
   }
   return tracker;
 }
 
-// The state as the arrays of agvdyn.online.tracker.TrackerState: theta (8), P (8, 8), R (3),
-// n_rows (9), g (2, 2), Iw (2, 2, 8, 8), bw (2, 2, 8), start (2, 2); CUSUM (i, s) is index 2 i + s.
+// The state as the arrays of agvdyn.online.tracker.TrackerState: theta (ns), P (ns, ns), R (3),
+// n_rows (9), g (2, 2), Iw (2, 2, ns, ns), bw (2, 2, ns), start (2, 2); CUSUM (i, s) is index 2 i + s;
+// ns = 8, 9 with com_offset (tracker.states()).
 void check_size(const char* name, std::size_t size, std::size_t expected) {
   if (size != expected) {
     throw std::invalid_argument(std::string(name) + " of " + std::to_string(size) + " values: expected " +
@@ -211,69 +219,102 @@ void check_size(const char* name, std::size_t size, std::size_t expected) {
   }
 }
 
-void check_state_sizes(Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
-  check_size("theta", theta.size(), 8);
-  check_size("P", P.size(), 64);
+void check_state_sizes(std::size_t ns, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
+  check_size("theta", theta.size(), ns);
+  check_size("P", P.size(), ns * ns);
   check_size("R", R.size(), 3);
   check_size("n_rows", n_rows.size(), 9);
   check_size("g", g.size(), 4);
-  check_size("Iw", Iw.size(), 256);
-  check_size("bw", bw.size(), 32);
+  check_size("Iw", Iw.size(), 4 * ns * ns);
+  check_size("bw", bw.size(), 4 * ns);
   check_size("start", start.size(), 4);
 }
 
-void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
-  check_state_sizes(theta, P, R, n_rows, g, Iw, bw, start);
-  ff::PayloadTracker::State st = tracker.state();
-  for (int p = 0; p < 8; ++p) {
+template <int N>
+void load_state_of(ff::PayloadTracker& tracker, ff::TrackerStateOf<N> st, Flat theta, Flat P, Flat R, Flat n_rows,
+                   Flat g, Flat Iw, Flat bw, Flat start) {
+  check_state_sizes(N, theta, P, R, n_rows, g, Iw, bw, start);
+  for (int p = 0; p < N; ++p) {
     st.theta[p] = theta.data()[p];
-    for (int q = 0; q < 8; ++q) st.P(p, q) = P.data()[8 * p + q];
+    for (int q = 0; q < N; ++q) st.P(p, q) = P.data()[N * p + q];
   }
   for (int k = 0; k < 3; ++k) st.R[k] = R.data()[k];
   for (int k = 0; k < 9; ++k) st.n_rows[k] = n_rows.data()[k];
   for (int c = 0; c < 4; ++c) {
     st.g[static_cast<std::size_t>(c)] = g.data()[c];
     st.start[static_cast<std::size_t>(c)] = static_cast<std::int64_t>(start.data()[c]);
-    for (int p = 0; p < 8; ++p) {
-      st.bw[static_cast<std::size_t>(c)][p] = bw.data()[8 * c + p];
-      for (int q = 0; q < 8; ++q) st.Iw[static_cast<std::size_t>(c)](p, q) = Iw.data()[64 * c + 8 * p + q];
+    for (int p = 0; p < N; ++p) {
+      st.bw[static_cast<std::size_t>(c)][p] = bw.data()[N * c + p];
+      for (int q = 0; q < N; ++q) st.Iw[static_cast<std::size_t>(c)](p, q) = Iw.data()[N * N * c + N * p + q];
     }
   }
   st.sample = 0;
   if (tracker.set_state(st) != ff::Status::ok) throw std::invalid_argument("tracker state: NaN or infinity");
 }
 
-void store_state(const ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw,
-                 Flat start) {
-  check_state_sizes(theta, P, R, n_rows, g, Iw, bw, start);
-  const ff::PayloadTracker::State& st = tracker.state();
-  for (int p = 0; p < 8; ++p) {
+void load_state(ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
+  if (tracker.states() == ff::kOffsetStates) {
+    load_state_of<ff::kOffsetStates>(tracker, tracker.offset_state(), theta, P, R, n_rows, g, Iw, bw, start);
+  } else {
+    load_state_of<ff::kTrackerStates>(tracker, tracker.state(), theta, P, R, n_rows, g, Iw, bw, start);
+  }
+}
+
+template <int N>
+void store_state_of(const ff::TrackerStateOf<N>& st, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw,
+                    Flat start) {
+  check_state_sizes(N, theta, P, R, n_rows, g, Iw, bw, start);
+  for (int p = 0; p < N; ++p) {
     theta.data()[p] = st.theta[p];
-    for (int q = 0; q < 8; ++q) P.data()[8 * p + q] = st.P(p, q);
+    for (int q = 0; q < N; ++q) P.data()[N * p + q] = st.P(p, q);
   }
   for (int k = 0; k < 3; ++k) R.data()[k] = st.R[k];
   for (int k = 0; k < 9; ++k) n_rows.data()[k] = st.n_rows[k];
   for (int c = 0; c < 4; ++c) {
     g.data()[c] = st.g[static_cast<std::size_t>(c)];
     start.data()[c] = static_cast<double>(st.start[static_cast<std::size_t>(c)]);
-    for (int p = 0; p < 8; ++p) {
-      bw.data()[8 * c + p] = st.bw[static_cast<std::size_t>(c)][p];
-      for (int q = 0; q < 8; ++q) Iw.data()[64 * c + 8 * p + q] = st.Iw[static_cast<std::size_t>(c)](p, q);
+    for (int p = 0; p < N; ++p) {
+      bw.data()[N * c + p] = st.bw[static_cast<std::size_t>(c)][p];
+      for (int q = 0; q < N; ++q) Iw.data()[N * N * c + N * p + q] = st.Iw[static_cast<std::size_t>(c)](p, q);
     }
   }
 }
 
-// N samples through update(): per sample the 8 estimates and variances (as agvdyn.online's
-// track_rows), nis, event flags; returns (status, first refused row or -1, events).
+void store_state(const ff::PayloadTracker& tracker, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw,
+                 Flat start) {
+  if (tracker.states() == ff::kOffsetStates) {
+    store_state_of<ff::kOffsetStates>(tracker.offset_state(), theta, P, R, n_rows, g, Iw, bw, start);
+  } else {
+    store_state_of<ff::kTrackerStates>(tracker.state(), theta, P, R, n_rows, g, Iw, bw, start);
+  }
+}
+
+template <int N>
+void copy_states(const ff::TrackerStateOf<N>& st, double* th, double* va, std::size_t j) {
+  for (int p = 0; p < N; ++p) {
+    th[N * j + static_cast<std::size_t>(p)] = st.theta[p];
+    va[N * j + static_cast<std::size_t>(p)] = st.P(p, p);
+  }
+}
+
+// N samples through update(): per sample the ns estimates and variances (as agvdyn.online's
+// track_rows), nis, event flags and, with com_offset, (y_c, y_c_std) into `offset` (N, 2); phi (N, 2),
+// (N, 3) with com_offset (phi_m, phi_C, phi_y); returns (status, first refused row or -1, events).
 std::tuple<int, long, std::vector<Event>> run_tracker(ff::PayloadTracker& tracker, InKind kind, In2 phi, In1 z,
-                                                      Out2 theta, Out2 var, Out1 nis, OutKind event) {
+                                                      Out2 theta, Out2 var, Out1 nis, OutKind event,
+                                                      std::optional<Out2> offset) {
   const std::size_t n = kind.shape(0);
-  check_shape("phi", phi.shape(0), phi.shape(1), n, 2);
+  const bool com = tracker.states() == ff::kOffsetStates;
+  const std::size_t ns = static_cast<std::size_t>(tracker.states()), width = com ? 3 : 2;
+  check_shape("phi", phi.shape(0), phi.shape(1), n, width);
   check_shape("z", z.shape(0), 1, n, 1);
-  check_shape("theta", theta.shape(0), theta.shape(1), n, 8);
-  check_shape("var", var.shape(0), var.shape(1), n, 8);
+  check_shape("theta", theta.shape(0), theta.shape(1), n, ns);
+  check_shape("var", var.shape(0), var.shape(1), n, ns);
   check_shape("nis", nis.shape(0), 1, n, 1);
   check_shape("event", event.shape(0), 1, n, 1);
+  if (com && !offset) throw std::invalid_argument("offset: expected an (N, 2) array with com_offset");
+  if (offset) check_shape("offset", offset->shape(0), offset->shape(1), n, 2);
+  double* off = offset ? offset->data() : nullptr;
   std::vector<Event> events;
   int first_status = 0;
   long first_row = -1;
@@ -288,16 +329,21 @@ std::tuple<int, long, std::vector<Event>> run_tracker(ff::PayloadTracker& tracke
     nb::gil_scoped_release release;
     ff::TrackerOutput out;
     for (std::size_t j = 0; j < n; ++j) {
-      const ff::TrackerRow row{static_cast<ff::RowKind>(k[j]), ph[2 * j], ph[2 * j + 1], zz[j]};
+      const ff::TrackerRow row{static_cast<ff::RowKind>(k[j]), ph[width * j], ph[width * j + 1], zz[j],
+                               com ? ph[width * j + 2] : 0.0};
       const ff::Status status = tracker.update(row, out);
       if (status != ff::Status::ok && first_row < 0) {
         first_status = static_cast<int>(status);
         first_row = static_cast<long>(j);
       }
-      const ff::PayloadTracker::State& st = tracker.state();
-      for (int p = 0; p < 8; ++p) {
-        th[8 * j + static_cast<std::size_t>(p)] = st.theta[p];
-        va[8 * j + static_cast<std::size_t>(p)] = st.P(p, p);
+      if (com) {
+        copy_states(tracker.offset_state(), th, va, j);
+      } else {
+        copy_states(tracker.state(), th, va, j);
+      }
+      if (off != nullptr) {
+        off[2 * j] = out.y_c;
+        off[2 * j + 1] = out.y_c_std;
       }
       ni[j] = out.nis;
       ev[j] = out.event;
@@ -336,11 +382,14 @@ NB_MODULE(_core, m) {
       .def(
           "__init__",
           [](ff::PayloadTracker* self, std::tuple<double, double> nominal, std::tuple<double, double> nominal_std,
-             double dt, const std::map<std::string, double>& settings) {
-            new (self) ff::PayloadTracker(make_tracker(nominal, nominal_std, dt, settings));
+             double dt, const std::map<std::string, double>& settings, double y_c, double y_c_std) {
+            new (self) ff::PayloadTracker(make_tracker(nominal, nominal_std, dt, settings, y_c, y_c_std));
           },
-          nb::arg("nominal"), nb::arg("nominal_std"), nb::arg("dt"), nb::arg("settings"),
-          "PayloadTracker((m_ch, C_ch), (std, std), dt, {setting: value}) (agvdyn_ff::PayloadTracker::create)")
+          nb::arg("nominal"), nb::arg("nominal_std"), nb::arg("dt"), nb::arg("settings"), nb::kw_only(),
+          nb::arg("y_c") = 0.0, nb::arg("y_c_std") = std::numeric_limits<double>::infinity(),
+          "PayloadTracker((m_ch, C_ch), (std, std), dt, {setting: value}, *, y_c, y_c_std) "
+          "(agvdyn_ff::PayloadTracker::create; com_offset: 1.0 in settings)")
+      .def_prop_ro("states", &ff::PayloadTracker::states)
       .def("load_state", &load_state, nb::arg("theta"), nb::arg("P"), nb::arg("R"), nb::arg("n_rows"), nb::arg("g"),
            nb::arg("Iw"), nb::arg("bw"), nb::arg("start"),
            "Set the state from the arrays of agvdyn.online.tracker.TrackerState; the sample count restarts at 0.")
@@ -348,9 +397,10 @@ NB_MODULE(_core, m) {
            nb::arg("Iw"), nb::arg("bw"), nb::arg("start"), "Write the state into TrackerState's arrays (in place).")
       .def("begin_log", &ff::PayloadTracker::begin_log, "CUSUMs to zero, samples counted from 0 (a new log).")
       .def("run", &run_tracker, nb::arg("kind"), nb::arg("phi"), nb::arg("z"), nb::arg("theta"), nb::arg("var"),
-           nb::arg("nis"), nb::arg("event"),
+           nb::arg("nis"), nb::arg("event"), nb::arg("offset").none() = nb::none(),
            "Update with N rows; fill theta, var (N, 8), nis, event (N,); return (status, first refused row or -1, "
-           "events [(sample, start, parameter, sign, before, before_var, after, after_var)]).")
+           "events [(sample, start, parameter, sign, before, before_var, after, after_var)]). With com_offset: "
+           "phi (N, 3) (phi_m, phi_C, phi_y), theta and var (N, 9), offset (N, 2) gets (y_c, y_c_std).")
       .def(
           "update",
           [](ff::PayloadTracker& self, int kind, double phi_m, double phi_C, double z) {

@@ -13,7 +13,9 @@ read this file. Regenerate after a change of the Python model::
 
 Also the payload tracker's vectors (``--tracker`` alone): ``cpp/tests/tracker_vectors.json`` (settings,
 events, final state) and ``cpp/tests/data/tracker_sequence.csv`` (per sample: the row the C++
-``PayloadTracker::update`` takes and the outputs of the Python reference ``agvdyn.online.tracker``).
+``PayloadTracker::update`` takes and the outputs of the Python reference ``agvdyn.online.tracker``);
+the same with the centre-of-mass offset in ``tracker_offset_vectors.json`` and
+``data/tracker_offset_sequence.csv`` (rows with phi_y, outputs with y_c and its std).
 """
 from __future__ import annotations
 
@@ -44,6 +46,11 @@ DATA = Path(__file__).with_name("data")
 TRACKER_SEQUENCE = DATA / "tracker_sequence.csv"
 #: Columns of the tracker sequence: the inputs of PayloadTracker::update, then the Python outputs.
 TRACKER_COLUMNS = ("log", "kind", "phi_m", "phi_C", "z", "m_ch", "C_ch", "m_ch_std", "C_ch_std", "nis", "event")
+#: The same with the centre-of-mass offset (TrackerSettings(com_offset=True)).
+TRACKER_OFFSET_PATH = Path(__file__).with_name("tracker_offset_vectors.json")
+TRACKER_OFFSET_SEQUENCE = DATA / "tracker_offset_sequence.csv"
+TRACKER_OFFSET_COLUMNS = ("log", "kind", "phi_m", "phi_C", "phi_y", "z", "m_ch", "C_ch", "m_ch_std", "C_ch_std",
+                          "y_c", "y_c_std", "nis", "event")
 SEED = 20240613
 CASES_PER_MODE = 16
 #: |u_cpp - u_python| <= RELATIVE * max|u_python| + ABSOLUTE, per case (N m).
@@ -263,11 +270,13 @@ def write_example_data() -> None:
 
 # --- the payload tracker (agvdyn.online.tracker; C++ agvdyn_ff::PayloadTracker) -------------------
 
-def tracker_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], float]:
-    """The tracker's input rows, per log: (kind (N,), phi (N, 2), z (N,)), and dt. Log 0: the causal rows
-    (agvdyn.online.rows) of a simulated warehouse drive (our plant, prototype, Table 2, seed 2) that
-    picks up 300 kg (at (0.2, 0) m, C 60 kg m^2) at 5 s, samples without a row thinned to every 25th,
-    the first 3,500; log 1: :func:`_synthetic_rows`."""
+#: Settings of TrackerSettings the vectors hold (the rest belong to the rows); the paper's vectors
+#: without those of the centre-of-mass offset (they are as they were before it).
+OFFSET_SETTINGS = ("com_offset", "offset_change", "offset_std", "offset_walk")
+
+
+def _simulated_rows(duration: int, seed: int, payload: str, com_offset: bool):
+    """The causal rows of a simulated ``driving`` run (our plant, prototype, Table 2) with ``payload``."""
     import subprocess
     import tempfile
 
@@ -278,15 +287,43 @@ def tracker_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], f
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "drive.parquet"
-        subprocess.run([str(Path(sys.executable).with_name("agvdyn")), "simulate", "driving", "--duration", "16", "--seed", "2",
-                        "--payload", "5:300:0.2,0:60", "--quiet", "--out", str(out)], check=True, capture_output=True)
+        subprocess.run([str(Path(sys.executable).with_name("agvdyn")), "simulate", "driving", "--duration", str(duration),
+                        "--seed", str(seed), "--payload", payload, "--quiet", "--out", str(out)], check=True,
+                       capture_output=True)
         log = load_log(out)
     rules = TrackerSettings().rules
-    rows = causal_rows(log.t, log.alpha, log.beta, log.torque, PROTOTYPE, PAPER_PARAMETERS, rules=rules,
-                       torque_lead=0.0, slip_threshold=TrackerSettings().slip_threshold)
+    return causal_rows(log.t, log.alpha, log.beta, log.torque, PROTOTYPE, PAPER_PARAMETERS, rules=rules,
+                       torque_lead=0.0, slip_threshold=TrackerSettings().slip_threshold, com_offset=com_offset)
+
+
+def tracker_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], float]:
+    """The tracker's input rows, per log: (kind (N,), phi (N, 2), z (N,)), and dt. Log 0: the causal rows
+    (agvdyn.online.rows) of a simulated warehouse drive (our plant, prototype, Table 2, seed 2) that
+    picks up 300 kg (at (0.2, 0) m, C 60 kg m^2) at 5 s, samples without a row thinned to every 25th,
+    the first 3,500; log 1: :func:`_synthetic_rows`."""
+    rows = _simulated_rows(16, 2, "5:300:0.2,0:60", False)
     keep = np.flatnonzero((rows.kind > 0) | (np.arange(rows.n) % 25 == 0))[:3500]  # the step's detection: 1,889
     logs = [(rows.kind[keep].astype(np.int64), rows.phi[keep], rows.z[keep])]
     logs.append(_synthetic_rows(np.random.default_rng(SEED)))
+    return logs, rows.dt
+
+
+def tracker_offset_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], float]:
+    """The rows of the tracker with the centre-of-mass offset, phi (N, 3) = (phi_m, phi_C, phi_y). Log 0:
+    the causal rows of a simulated drive (seed 3: a lane change from 7 s) that picks up 250 kg at (0, 0.2) m
+    (C 50 kg m^2) at 4 s, samples without a row thinned to every 25th, the first 6,000; log 1: the
+    synthetic rows of :func:`_synthetic_rows` with an m_ch y_c column in half of every x_ch run (its
+    car-like part), m_ch y_c stepping from 0 to 40 kg m with the drop and C_ch's step doubled."""
+    rows = _simulated_rows(24, 3, "4:250:0,0.2:50", True)
+    keep = np.flatnonzero((rows.kind > 0) | (np.arange(rows.n) % 25 == 0))[:6000]
+    logs = [(rows.kind[keep].astype(np.int64), rows.phi[keep], rows.z[keep])]
+    kind, phi, z = _synthetic_rows(np.random.default_rng(SEED))
+    i = np.arange(kind.size)
+    turning = np.isin(kind, (1, 2)) & ((i // 150) % 2 == 1)  # the car-like part: every other 150 rows
+    phi_y = np.where(turning, 0.3 * np.cos(2 * np.pi * i / 300.0), 0.0)
+    s_y = np.where(i >= 3200, 40.0, 0.0)  # with the drop (the second x_ch+ run)
+    more_C = np.where(i >= 4600, 40.0, 0.0)  # C_ch's step doubled: an alarm of C_ch's CUSUM here too
+    logs.append((kind, np.column_stack([phi, phi_y]), z + phi_y * s_y + phi[:, 1] * more_C))
     return logs, rows.dt
 
 
@@ -316,30 +353,33 @@ def _synthetic_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, n
     return kind, phi, z
 
 
-def run_python_tracker(logs, dt: float, nominal, nominal_std):
+def run_python_tracker(logs, dt: float, nominal, nominal_std, com_offset: bool = False):
     """The Python reference over the logs as agvdyn.online.track runs them (state carried, CUSUMs
-    restarted per log): per-sample outputs (N, 6) = m_ch, C_ch, their stds, nis, event; the events
-    (log, parameter, sign, sample, start, before, before_var, after, after_var); the final state."""
+    restarted per log): per-sample outputs (N, 6) = m_ch, C_ch, their stds, nis, event ((N, 8) with the
+    offset: y_c and its std before nis); the events (log, parameter, sign, sample, start, before,
+    before_var, after, after_var); the final state."""
     from agvdyn.online import _kernels as kern
     from agvdyn.online import TrackerSettings
     from agvdyn.online.tracker import TrackerState
     from agvdyn.platform import PAPER_PARAMETERS
 
-    settings = TrackerSettings()
+    settings = TrackerSettings(com_offset=com_offset)
     params = PAPER_PARAMETERS.replace(m_ch=float(nominal[0]), C_ch=float(nominal[1]))
     state = TrackerState.initial(params, dict(zip(("m_ch", "C_ch"), nominal_std)), settings)
     k = settings.constants(np.asarray(nominal, dtype=float), dt)
+    ns = settings.states
     outputs, events = [], []
     for index, (kind, phi, z) in enumerate(logs):
         n = kind.size
         state.g[:] = 0.0
-        theta, var, nis = np.zeros((n, kern.NS)), np.zeros((n, kern.NS)), np.zeros(n)
+        theta, var, nis = np.zeros((n, ns)), np.zeros((n, ns)), np.zeros(n)
         flag = np.zeros(n, dtype=np.int64)
+        offset = np.zeros((n if com_offset else 0, 2))
         found = np.zeros((settings.max_events, kern.E_NCOLS))
         count = kern.track_rows(np.ascontiguousarray(phi), np.ascontiguousarray(z), kind, k, state.theta, state.P,
                                 state.R, state.n_rows, state.g, state.Iw, state.bw, state.start, theta, var, nis,
-                                flag, found, 0)
-        outputs.append(np.column_stack([theta[:, :2], np.sqrt(var[:, :2]), nis, flag]))
+                                flag, offset, found, 0)
+        outputs.append(np.column_stack([theta[:, :2], np.sqrt(var[:, :2]), *([offset] if com_offset else []), nis, flag]))
         for e in found[:count]:
             events.append({"log": index, "parameter": int(e[kern.E_PARAM]), "sign": int(e[kern.E_SIGN]),
                            "sample": int(e[kern.E_K]), "start": int(e[kern.E_START]),
@@ -350,26 +390,38 @@ def run_python_tracker(logs, dt: float, nominal, nominal_std):
     return np.concatenate(outputs), events, final
 
 
-def tracker_vectors() -> tuple[dict[str, Any], list[list[float]]]:
-    """The tracker's vectors (JSON part) and the per-sample table of cpp/tests/data/tracker_sequence.csv."""
+def tracker_vectors(com_offset: bool = False) -> tuple[dict[str, Any], list[list[float]]]:
+    """The tracker's vectors (JSON part) and the per-sample table of cpp/tests/data/tracker_sequence.csv
+    (with ``com_offset``: tracker_offset_vectors.json, data/tracker_offset_sequence.csv)."""
     from agvdyn.online import TrackerSettings
     from agvdyn.platform import PAPER_PARAMETERS, PAPER_STD
 
-    logs, dt = tracker_inputs()
+    logs, dt = tracker_offset_inputs() if com_offset else tracker_inputs()
     nominal = [PAPER_PARAMETERS.m_ch, PAPER_PARAMETERS.C_ch]
     nominal_std = [PAPER_STD["m_ch"], PAPER_STD["C_ch"]]
-    outputs, events, final = run_python_tracker(logs, dt, nominal, nominal_std)
-    settings = {k: v for k, v in TrackerSettings().__dict__.items() if k not in ("rules", "slip_threshold", "max_events")}
-    data = {
-        "description": "C++ PayloadTracker (cpp/) against the Python reference agvdyn.online.tracker on one "
+    outputs, events, final = run_python_tracker(logs, dt, nominal, nominal_std, com_offset)
+    skip = ("rules", "slip_threshold", "max_events") + (() if com_offset else OFFSET_SETTINGS)
+    settings = {k: v for k, v in TrackerSettings(com_offset=com_offset).__dict__.items() if k not in skip}
+    if com_offset:
+        description = ("C++ PayloadTracker with com_offset (cpp/) against the Python reference agvdyn.online.tracker on "
+                       "one sequence of rows (phi_m, phi_C, phi_y) (log 0: a simulated drive picking up 250 kg at "
+                       "(0, 0.2) m at 4 s, a lane change from 7 s; log 1: synthetic rows of every kind with an m_ch y_c "
+                       "column in the x_ch rows, a drop, a C_ch step of +80 kg m^2 and m_ch y_c 0 -> 40 kg m); per-sample table in "
+                       f"data/{TRACKER_OFFSET_SEQUENCE.name}; y_c from the start 0 with the prior std offset_std; "
+                       "generated by cpp/tests/make_vectors.py, read by ff_tests and tests/test_online.py")
+    else:
+        description = ("C++ PayloadTracker (cpp/) against the Python reference agvdyn.online.tracker on one "
                        "sequence of rows (log 0: a simulated drive picking up 300 kg at 5 s; log 1: synthetic rows "
                        "of every kind with a drop and a C_ch step); per-sample table in data/tracker_sequence.csv; "
-                       "generated by cpp/tests/make_vectors.py, read by ff_tests and tests/test_cpp_feedforward.py",
+                       "generated by cpp/tests/make_vectors.py, read by ff_tests and tests/test_cpp_feedforward.py")
+    data = {
+        "description": description,
         "tolerance": {"relative": RELATIVE, "rule": "|x - x_ref| <= relative * max(|x_ref|, 1) for every output "
                       "(estimates, stds, nis, event values and variances, final state); NaN nis where the reference "
                       "has NaN; event flags, event samples, starts, signs exact"},
         "settings": settings, "nominal": nominal, "nominal_std": nominal_std, "dt": dt,
-        "logs": [int(kind.size) for kind, _, _ in logs], "sequence": f"data/{TRACKER_SEQUENCE.name}",
+        "logs": [int(kind.size) for kind, _, _ in logs],
+        "sequence": f"data/{(TRACKER_OFFSET_SEQUENCE if com_offset else TRACKER_SEQUENCE).name}",
         "events": events, "final": final,
     }
     table = []
@@ -377,18 +429,20 @@ def tracker_vectors() -> tuple[dict[str, Any], list[list[float]]]:
     for index, (kind, phi, z) in enumerate(logs):
         for j in range(kind.size):
             o = outputs[offset + j]
-            table.append([index, int(kind[j]), float(phi[j, 0]), float(phi[j, 1]), float(z[j]), *map(float, o[:5]), int(o[5])])
+            table.append([index, int(kind[j]), *map(float, phi[j]), float(z[j]), *map(float, o[:-1]), int(o[-1])])
         offset += kind.size
     return data, table
 
 
 def write_tracker_vectors() -> None:
-    data, table = tracker_vectors()
-    TRACKER_PATH.write_text(to_text(data), encoding="utf-8")
-    DATA.mkdir(exist_ok=True)
-    lines = [",".join(TRACKER_COLUMNS)]
-    lines += [",".join(repr(v) if isinstance(v, float) else str(v) for v in row) for row in table]
-    TRACKER_SEQUENCE.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    for com_offset in (False, True):
+        data, table = tracker_vectors(com_offset)
+        (TRACKER_OFFSET_PATH if com_offset else TRACKER_PATH).write_text(to_text(data), encoding="utf-8")
+        DATA.mkdir(exist_ok=True)
+        lines = [",".join(TRACKER_OFFSET_COLUMNS if com_offset else TRACKER_COLUMNS)]
+        lines += [",".join(repr(v) if isinstance(v, float) else str(v) for v in row) for row in table]
+        (TRACKER_OFFSET_SEQUENCE if com_offset else TRACKER_SEQUENCE).write_text("\n".join(lines) + "\n",
+                                                                              encoding="utf-8")
 
 
 def main() -> int:
@@ -403,7 +457,7 @@ def main() -> int:
         print(f"wrote {DATA}/params.yaml, platform.yaml, feedforward_short.csv")
     if "--feedforward" not in only or "--tracker" in only:
         write_tracker_vectors()
-        print(f"wrote {TRACKER_PATH}, {TRACKER_SEQUENCE}")
+        print(f"wrote {TRACKER_PATH}, {TRACKER_SEQUENCE}, {TRACKER_OFFSET_PATH}, {TRACKER_OFFSET_SEQUENCE}")
     return 0
 
 

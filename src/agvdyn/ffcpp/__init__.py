@@ -155,15 +155,17 @@ def read_parameter_file(path) -> dict:
 
 #: Fields of agvdyn.online.TrackerSettings that the C++ tracker takes (the rest belong to the rows).
 TRACKER_SETTINGS = ("change_size", "gate", "correlation", "rotation_correlation", "threshold", "random_walk",
-                    "bias_walk", "reset_std", "noise_time", "warm_rows", "initial_std", "bias_std", "noise")
+                    "bias_walk", "reset_std", "noise_time", "warm_rows", "initial_std", "bias_std", "noise",
+                    "com_offset", "offset_change", "offset_std", "offset_walk")
 
 
 def track_rows(kind, phi, z, state, settings, nominal, dt: float):
     """The rows of one log through ``agvdyn_ff::PayloadTracker`` (the C++ twin of
-    ``agvdyn.online._kernels.track_rows``): ``kind`` (N,), ``phi`` (N, 2), ``z`` (N,); ``state`` an
-    ``agvdyn.online.tracker.TrackerState`` (updated in place), ``settings`` a ``TrackerSettings``,
-    ``nominal`` (m_ch, C_ch), ``dt`` s. Returns estimates (N, 8), variances (N, 8), NIS (N,), event flags
-    (N,) and the events as tuples (sample, start, parameter, sign, before, before_var, after, after_var).
+    ``agvdyn.online._kernels.track_rows``): ``kind`` (N,), ``phi`` (N, 2; (N, 3) with ``settings.com_offset``),
+    ``z`` (N,); ``state`` an ``agvdyn.online.tracker.TrackerState`` (updated in place), ``settings`` a
+    ``TrackerSettings``, ``nominal`` (m_ch, C_ch), ``dt`` s. Returns estimates (N, ns), variances (N, ns)
+    (ns = 8, 9 with the offset), NIS (N,), event flags (N,), the events as tuples (sample, start, parameter,
+    sign, before, before_var, after, after_var) and (y_c, its std) (N, 2) ((N, 0) without the offset).
     ValueError naming the first refused row (unknown kind, NaN or infinity)."""
     core = extension()
     tracker = core.PayloadTracker((float(nominal[0]), float(nominal[1])), (0.0, 0.0), float(dt),
@@ -176,11 +178,13 @@ def track_rows(kind, phi, z, state, settings, nominal, dt: float):
     phi = np.ascontiguousarray(phi, dtype=float)
     z = np.ascontiguousarray(z, dtype=float)
     n = kind.size
-    theta, var, nis = np.zeros((n, 8)), np.zeros((n, 8)), np.zeros(n)
+    ns = tracker.states
+    theta, var, nis = np.zeros((n, ns)), np.zeros((n, ns)), np.zeros(n)
     flag = np.zeros(n, dtype=np.int64)
-    status, row, events = tracker.run(kind, phi, z, theta, var, nis, flag)
+    offset = np.zeros((n if settings.com_offset else 0, 2))
+    status, row, events = tracker.run(kind, phi, z, theta, var, nis, flag, offset if settings.com_offset else None)
     tracker.store_state(*arrays)
     if row >= 0:
         raise ValueError(f"C++ tracker, row {row}: kind {int(kind[row])}, phi {phi[row].tolist()}, z {float(z[row])}: "
                          f"{core.status_name(status)}: expected a kind 0..6 and finite phi, z")
-    return theta, var, nis, flag, events
+    return theta, var, nis, flag, events, offset

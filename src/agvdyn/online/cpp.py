@@ -5,32 +5,30 @@ rows stay Python's (:mod:`agvdyn.online.rows`). ``agvdyn track --engine cpp`` us
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Sequence
 
 import numpy as np
 
 from agvdyn import ffcpp
-from agvdyn.online.rows import TRACKED, OnlineRows
-from agvdyn.online.tracker import ChangeEvent, TrackerSettings, TrackerState
+from agvdyn.model_spec import ModelParameters
+from agvdyn.online.rows import OnlineRows
+from agvdyn.online.tracker import TrackerRun, TrackerSettings, TrackerState, change_events, check_rows
 from agvdyn.platform import Geometry, Parameters
 
 __all__ = ["run_tracker", "track"]
 
 
 def run_tracker(rows: OnlineRows, state: TrackerState, settings: TrackerSettings, nominal: np.ndarray,
-                source: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[ChangeEvent]]:
+                source: str = "") -> TrackerRun:
     """:func:`agvdyn.online.tracker.run_tracker` with the C++ update: same arguments and results."""
-    theta, var, nis, flag, raw = ffcpp.track_rows(rows.kind, rows.phi, rows.z, state, settings, nominal, rows.dt)
-    late = rows.lookahead * rows.dt
-    found = [ChangeEvent(TRACKED[p], float(rows.t[k] + late), float(rows.t[start] - rows.group_delay), int(sign),
-                         float(before), math.sqrt(before_var), float(after), math.sqrt(after_var), source)
-             for k, start, p, sign, before, before_var, after, after_var in raw[:settings.max_events]]
-    return theta, var, nis, flag, found
+    check_rows(rows, state, settings)
+    theta, var, nis, flag, raw, offset = ffcpp.track_rows(rows.kind, rows.phi, rows.z, state, settings, nominal,
+                                                          rows.dt)
+    return TrackerRun(theta, var, nis, flag, change_events(rows, raw[:settings.max_events], source), offset)
 
 
-def track(logs: Sequence[Any], geometry: Geometry, params: Parameters, *, std: dict[str, float] | None = None,
-          settings: TrackerSettings = TrackerSettings()):
+def track(logs: Sequence[Any], geometry: Geometry, params: Parameters | ModelParameters, *,
+          std: dict[str, float] | None = None, settings: TrackerSettings = TrackerSettings()):
     """:func:`agvdyn.online.track` with the C++ update: the same replay (state carried from log to log,
     CUSUMs restarted) and the same :class:`~agvdyn.online.TrackResult`."""
     from agvdyn.online import track as replay

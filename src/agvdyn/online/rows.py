@@ -23,6 +23,14 @@ vectorised passes over a log; each value depends only on samples up to ``k + loo
 Row k: ``z_k = phi_k . (m_ch, C_ch)`` with ``phi_k`` the m_ch and C_ch columns of ``H_k^T Theta`` and
 ``z_k = H_k^T B u - (H_k^T Theta)_others p_others`` (every other parameter at its identified value).
 
+With the centre-of-mass offset (``com_offset``; :mod:`agvdyn.model_spec`) ``phi_k`` has a third entry,
+the column of ``m_ch y_c``: ``H_k^T (-w_dot, -w^2, -a_x)`` over the chassis rows, with ``w^2 =
+gamma_dot^2`` through the same two filters (one more channel of the second), formed in car-like rows
+only, as the identification forms it: in straight, lateral and rotation motion the kinematics make
+it zero (no rotation with translation), and what the measured signals would give there is noise.
+``m_ch x_c`` has no column: it cancels in every mode (in car-like rows ``-w^2 + kappa a_y = 0``), so
+x_c is not identifiable (the tracker reports it with an infinite std).
+
 Delay: a row describes the vehicle as it was ``group_delay`` s earlier (the two filters' group delay
 at low frequency, 2 x 2.61 / omega_g = 131 ms at 40 rad/s, order 4) and is complete ``lookahead``
 samples after its own time (2 for the differences plus the largest guard). Change times are stated
@@ -54,8 +62,8 @@ _DIFFERENCE_LOOKAHEAD = 2
 
 @dataclass(frozen=True, eq=False)
 class OnlineRows:
-    """Rows of one log: ``t`` (N,), ``phi`` (N, 2) m_ch and C_ch columns, ``z`` (N,) the rest of the
-    equation, ``kind`` (N,) int8 codes of :data:`ROW_KINDS` (0: no row at this sample),
+    """Rows of one log: ``t`` (N,), ``phi`` (N, 2) m_ch and C_ch columns (N, 3 with m_ch y_c's), ``z`` (N,)
+    the rest of the equation, ``kind`` (N,) int8 codes of :data:`ROW_KINDS` (0: no row at this sample),
     ``group_delay`` s, ``lookahead`` samples, ``dt`` s."""
 
     t: np.ndarray
@@ -92,9 +100,9 @@ def _guard(keep: np.ndarray, samples: int) -> np.ndarray:
 
 
 def _row_kinds(geom: Geometry, alpha: np.ndarray, q_dot: np.ndarray, slip: np.ndarray, rules: RowSettings,
-               slip_threshold: float, dt: float) -> tuple[np.ndarray, int]:
-    """Kind code (N,) of each sample's row (:data:`ROW_KINDS`) after the mode, stiction and slip rules, and
-    the guard in samples."""
+               slip_threshold: float, dt: float) -> tuple[np.ndarray, int, np.ndarray]:
+    """Kind code (N,) of each sample's row (:data:`ROW_KINDS`) after the mode, stiction and slip rules, the
+    guard in samples, and the motion mode (N,)."""
     mode = detect_mode(geom, alpha, tolerance=rules.mode_tolerance)
     kind = np.zeros(mode.size, dtype=np.int8)
     velocity = np.zeros(mode.size)
@@ -112,14 +120,16 @@ def _row_kinds(geom: Geometry, alpha: np.ndarray, q_dot: np.ndarray, slip: np.nd
         keep |= _guard(moving & (kind == k), guard)
     kind[~(keep & no_slip)] = 0
     signed = np.where(kind > 0, 2 * kind - 1 + (velocity < 0), 0).astype(np.int8)
-    return signed, max(guard, slip_guard)
+    return signed, max(guard, slip_guard), mode
 
 
 def _project(geom: Geometry, kind: np.ndarray, alpha: np.ndarray, signals: np.ndarray, torque: np.ndarray,
-             params: Parameters) -> tuple[np.ndarray, np.ndarray]:
-    """phi (N, 2) and z (N,) of the rows (zeros where kind == 0)."""
+             params: Parameters, car_like: np.ndarray | None = None,
+             w2: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """phi (N, 2) and z (N,) of the rows (zeros where kind == 0); with ``w2`` (the filtered gamma_dot^2)
+    phi (N, 3): the m_ch y_c column in the ``car_like`` rows (:func:`offset_column`)."""
     n = kind.size
-    phi, z = np.zeros((n, 2)), np.zeros(n)
+    phi, z = np.zeros((n, 2 if w2 is None else 3)), np.zeros(n)
     p = params.to_vector()
     cols = [PARAMETER_NAMES.index(name) for name in TRACKED]
     others = np.ones(p.size, dtype=bool)
@@ -134,16 +144,28 @@ def _project(geom: Geometry, kind: np.ndarray, alpha: np.ndarray, signals: np.nd
             H = kinematic_model(geom, mode, nominal_steering(geom, mode)[None])[:, :, c:c + 1]
         Y = project_signals(H, signals[idx])[:, 0, :]
         tau = geom.i_G * np.einsum("nw,nw->n", np.broadcast_to(H[:, 5:, 0], (idx.size, 4)), torque[idx])
-        phi[idx] = Y[:, cols]
+        phi[idx, :2] = Y[:, cols]
         z[idx] = tau - Y[:, others] @ p[others]
+        if w2 is not None and k == 1:
+            turn = car_like[idx]
+            phi[idx[turn], 2] = offset_column(H[turn, :, 0], signals[idx[turn]], w2[idx[turn]])
     return phi, z
+
+
+def offset_column(H: np.ndarray, signals: np.ndarray, w2: np.ndarray) -> np.ndarray:
+    """The m_ch y_c column (N,) of rows of one coordinate with kinematic column ``H`` (N, 9): ``H^T`` of the
+    chassis entries ``(-w_dot, -w^2, -a_x)`` (model_spec's com-offset rows; ``signals`` the filtered
+    entries of Theta, ``w2`` the filtered ``gamma_dot^2``), as the identification forms it
+    (``identification/_model_kernels.py``)."""
+    return -H[:, 0] * signals[:, 2] - H[:, 1] * w2 - H[:, 2] * signals[:, 0]
 
 
 def causal_rows(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, torque: np.ndarray, geom: Geometry,
                 params: Parameters, *, rules: RowSettings = RowSettings(), torque_lead: float = 0.0,
-                slip_threshold: float = 0.05) -> OnlineRows:
+                slip_threshold: float = 0.05, com_offset: bool = False) -> OnlineRows:
     """Rows of the tracker from one continuous log (module docstring). ``params``: every parameter
-    but m_ch and C_ch is held at its value here (the identified ones)."""
+    but m_ch and C_ch is held at its value here (the identified ones). ``com_offset``: a third column,
+    m_ch y_c's (car-like rows only; ``gamma_dot^2`` one more channel of the second filter)."""
     t = np.asarray(t, dtype=float)
     if t.size < 8:
         raise ValueError(f"a log of {t.size} samples: the tracker needs at least 8")
@@ -159,7 +181,13 @@ def causal_rows(t: np.ndarray, alpha: np.ndarray, beta: np.ndarray, torque: np.n
     chassis, slip = odometry_with_slip(geom, alpha_f, rates[:, :2], rates[:, 2:])
     q_dot = np.column_stack([chassis, rates])
     q_ddot = np.gradient(q_dot, dt, axis=0)
-    f2 = causal_lowpass(np.column_stack([regressor_signals(q_dot, q_ddot, rules.epsilon), f1[:, 6:]]), sos)
-    kind, guard = _row_kinds(geom, alpha_f, q_dot, slip, rules, slip_threshold, dt)
-    phi, z = _project(geom, kind, alpha_f, f2[:, :21], f2[:, 21:], params)
+    channels = [regressor_signals(q_dot, q_ddot, rules.epsilon), f1[:, 6:]]
+    if com_offset:
+        channels.append(np.square(q_dot[:, 2:3]))
+    f2 = causal_lowpass(np.column_stack(channels), sos)
+    kind, guard, mode = _row_kinds(geom, alpha_f, q_dot, slip, rules, slip_threshold, dt)
+    if com_offset:
+        phi, z = _project(geom, kind, alpha_f, f2[:, :21], f2[:, 21:25], params, mode == int(Mode.CAR_LIKE), f2[:, 25])
+    else:
+        phi, z = _project(geom, kind, alpha_f, f2[:, :21], f2[:, 21:], params)
     return OnlineRows(t, phi, z, kind, 2 * group_delay(sos, dt), _DIFFERENCE_LOOKAHEAD + guard, dt)

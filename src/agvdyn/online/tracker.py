@@ -1,10 +1,10 @@
-"""Payload tracker: recursive estimate of m_ch and C_ch with change detection (issue 31).
+"""Payload tracker: recursive estimate of m_ch and C_ch (and the centre-of-mass offset y_c with
+``com_offset``) with change detection (issue 31).
 
 Every other parameter is held at its identified value (a parameter file); the rows are the
-identification's chassis rows of eq. (19), filtered causally (:mod:`agvdyn.online.rows`). The
-identification model has no centre-of-mass offset yet (issue 30), so x_c and y_c are not tracked:
-an off-centre payload is seen through m_ch and C_ch (about the reference point) only, and its
-translation-yaw coupling is left in the residuals.
+identification's chassis rows of eq. (19), filtered causally (:mod:`agvdyn.online.rows`). Without
+``com_offset`` an off-centre payload is seen through m_ch and C_ch (about the reference point) only,
+and its translation-yaw coupling is left in the residuals of the car-like rows.
 
 Algorithm (the reference of the C++ twin: fixed sizes, no allocation per update)
 --------------------------------------------------------------------------------
@@ -50,6 +50,21 @@ side ``z``), with ``f = (phi_m, phi_C, e_c)`` (``e_c`` the unit vector of the ro
    A parameter whose window held no information keeps its value with the reset variance and is
    learnt from the next rows that excite it.
 
+Centre-of-mass offset (``com_offset``; model of :mod:`agvdyn.model_spec`): a ninth state ``s = m_ch y_c``
+(index :data:`~agvdyn.online._kernels.OFFSET`, after the biases) with the rows' third column ``phi_y``
+(nonzero in car-like rows only: x_c cancels in every mode and has no state). It follows the others:
+``f`` gains ``phi_y``; gated with ``delta_y = offset_change x m_ch`` (a y_c change of ``offset_change`` m,
+0.05); random walk ``q_y = (offset_walk m_ch)^2`` per s when excited, capped at the reset variance
+``(offset_std m_ch)^2`` (0.3 m); ``K_y = 0`` when not excited; no CUSUM of its own (a payload change
+is detected by m_ch's and C_ch's), but every reset re-estimates it with m_ch and C_ch (prior at its
+value, variance ``(offset_std m_ch)^2``). Reported: ``y_c = s / m_ch`` with the delta-method std
+``sqrt(g^T P g)``, ``g = (-s / m_ch^2, 1 / m_ch)`` over (m_ch, s), inf while ``P_ss`` is at its prior or
+above (no car-like row has informed it since the start or the last reset); x_c: NaN, inf. Without
+``com_offset`` the kernels run the eight states exactly as before (the state's size is a compile-time
+constant of each compiled variant). Measured (benchmarks/study_offset_tracking.py, docs/online.md):
+the std is optimistic on our plant (|error| / std up to ~8: the car-like rows' model error is
+correlated over a whole manoeuvre, longer than ``correlation``).
+
 Constants (``TrackerSettings``): delta = ``change_size`` x the identified value (0.1), gate 1,
 n_corr 150 (translation) and 300 (rotation) samples, h 8 (measured without a change: CUSUM maxima
 <= 5.5 in 2 h of driving; benchmarks/study_tracking.py), q = (``random_walk`` x value)^2 per s
@@ -61,8 +76,8 @@ and follows the data from the first row the detector tests.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -94,10 +109,17 @@ class TrackerSettings:
     bias_std: float = 30.0
     noise: float = 25.0
     max_events: int = 256
+    com_offset: bool = False
+    offset_change: float = 0.05
+    offset_std: float = 0.3
+    offset_walk: float = 1e-3
 
     def __post_init__(self) -> None:
+        if not isinstance(self.com_offset, (bool, np.bool_)):
+            raise ValueError(f"tracker setting com_offset={self.com_offset!r}: expected true or false")
         for key in ("slip_threshold", "change_size", "gate", "correlation", "rotation_correlation", "threshold", "random_walk", "bias_walk",
-                    "reset_std", "noise_time", "initial_std", "bias_std", "noise"):
+                    "reset_std", "noise_time", "initial_std", "bias_std", "noise", "offset_change", "offset_std",
+                    "offset_walk"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"tracker setting {key}={v!r}: expected a finite number > 0")
@@ -116,29 +138,56 @@ class TrackerSettings:
         k[kern.K_CORR_G] = self.rotation_correlation
         k[kern.K_BIAS_VAR] = self.bias_std ** 2
         k[kern.K_TAU_R], k[kern.K_WARM], k[kern.K_DT] = self.noise_time, self.warm_rows, dt
+        k[kern.K_DELTA_Y] = self.offset_change * nominal[0]
+        k[kern.K_Q_Y] = (self.offset_walk * nominal[0]) ** 2
+        k[kern.K_RESET_Y] = (self.offset_std * nominal[0]) ** 2
         return k
+
+    @property
+    def states(self) -> int:
+        """Size of the state: 8, 9 with the centre-of-mass offset."""
+        return kern.NS + int(self.com_offset)
 
 
 @dataclass(eq=False)
 class TrackerState:
-    """The mutable state of the tracker (module docstring), carried from one log to the next."""
+    """The mutable state of the tracker (module docstring), carried from one log to the next: ``ns`` = 8
+    states, 9 with the centre-of-mass offset (:attr:`TrackerSettings.states`)."""
 
     theta: np.ndarray
     P: np.ndarray
     R: np.ndarray
-    n_rows: np.ndarray = field(default_factory=lambda: np.zeros(9))
-    g: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
-    Iw: np.ndarray = field(default_factory=lambda: np.zeros((2, 2, kern.NS, kern.NS)))
-    bw: np.ndarray = field(default_factory=lambda: np.zeros((2, 2, kern.NS)))
-    start: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
+    n_rows: np.ndarray
+    g: np.ndarray
+    Iw: np.ndarray
+    bw: np.ndarray
+    start: np.ndarray
 
     @classmethod
-    def initial(cls, params: Parameters, std: dict[str, float], settings: TrackerSettings) -> "TrackerState":
+    def initial(cls, params: Parameters, std: dict[str, float], settings: TrackerSettings,
+                y_c: float = 0.0) -> "TrackerState":
+        """The parameter file's m_ch, C_ch (std at least ``initial_std`` x value), row biases 0 (std
+        ``bias_std``), noise ``noise``; with the offset, ``m_ch y_c`` from ``y_c`` m with std
+        ``max(std['y_c'], offset_change)`` when a finite one is given, else ``offset_std`` (its prior:
+        no finite std is reported until a row informs it), by the delta method."""
         nominal = np.array([getattr(params, name) for name in TRACKED])
         given = np.array([std.get(name, 0.0) or 0.0 for name in TRACKED])
         var = np.maximum(given, settings.initial_std * np.abs(nominal)) ** 2
         P = np.diag(np.concatenate([var, np.full(kern.NS - 2, settings.bias_std ** 2)]))
-        return cls(np.concatenate([nominal, np.zeros(kern.NS - 2)]), P, np.full(3, settings.noise))
+        theta = np.concatenate([nominal, np.zeros(kern.NS - 2)])
+        ns = settings.states
+        if settings.com_offset:
+            sd = std.get("y_c", math.inf)
+            if not math.isfinite(y_c) or (sd is not None and sd < 0):
+                raise ValueError(f"tracker: y_c={y_c!r} with std {sd!r}: expected a finite centre-of-mass offset in m "
+                                 "and a std >= 0 (inf or None: none given)")
+            sd = max(sd, settings.offset_change) if sd is not None and math.isfinite(sd) else settings.offset_std
+            theta = np.append(theta, nominal[0] * y_c)
+            P = np.pad(P, ((0, 1), (0, 1)))
+            P[kern.OFFSET, kern.OFFSET] = (nominal[0] * sd) ** 2 + (y_c ** 2) * var[0]
+            P[0, kern.OFFSET] = P[kern.OFFSET, 0] = y_c * var[0]
+        return cls(theta, P, np.full(3, settings.noise), np.zeros(9), np.zeros((2, 2)), np.zeros((2, 2, ns, ns)),
+                   np.zeros((2, 2, ns)), np.zeros((2, 2)))
 
 
 @dataclass(frozen=True)
@@ -164,23 +213,52 @@ class ChangeEvent:
                 "after": {"value": self.after, "std": self.after_std}, "source": self.source}
 
 
+class TrackerRun(NamedTuple):
+    """One log through the tracker: per sample the state ``theta`` (N, ns) and its variances ``var``
+    (N, ns), ``nis`` (N,) (NaN without a row), event flags ``event`` (N,), the ``events``, and
+    ``offset`` (N, 2): y_c and its std (:func:`~agvdyn.online._kernels.offset_estimate`; (N, 0)
+    without the centre-of-mass offset)."""
+
+    theta: np.ndarray
+    var: np.ndarray
+    nis: np.ndarray
+    event: np.ndarray
+    events: list[ChangeEvent]
+    offset: np.ndarray
+
+
+def check_rows(rows: OnlineRows, state: TrackerState, settings: TrackerSettings) -> None:
+    """ValueError unless the rows' columns, the state's size and the settings agree (m_ch y_c's column
+    and state exactly when ``settings.com_offset``)."""
+    cols, ns = rows.phi.shape[1], state.theta.size
+    if (cols, ns) != (2 + settings.com_offset, settings.states):
+        raise ValueError(f"tracker: rows with {cols} regressor columns and a state of {ns} for com_offset="
+                         f"{settings.com_offset}: expected {2 + settings.com_offset} and {settings.states} "
+                         "(causal_rows(..., com_offset=) and TrackerState.initial with the same settings)")
+
+
+def change_events(rows: OnlineRows, raw: Any, source: str) -> list[ChangeEvent]:
+    """The events of one log from their raw values ``(sample, start, parameter, sign, before, before_var,
+    after, after_var)``: detection time when the row was complete, change time less the group delay."""
+    late = rows.lookahead * rows.dt
+    return [ChangeEvent(TRACKED[int(p)], float(rows.t[int(k)] + late), float(rows.t[int(start)] - rows.group_delay),
+                        int(sign), float(before), math.sqrt(before_var), float(after), math.sqrt(after_var), source)
+            for k, start, p, sign, before, before_var, after, after_var in raw]
+
+
 def run_tracker(rows: OnlineRows, state: TrackerState, settings: TrackerSettings, nominal: np.ndarray,
-                source: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[ChangeEvent]]:
-    """One log's rows through the compiled tracker (``state`` updated in place): estimates (N, 5),
-    variances (N, 5), NIS (N,), event flags (N,) and the events."""
-    n = rows.n
-    out_theta, out_var, out_nis = np.zeros((n, kern.NS)), np.zeros((n, kern.NS)), np.zeros(n)
+                source: str = "") -> TrackerRun:
+    """One log's rows through the compiled tracker (``state`` updated in place)."""
+    check_rows(rows, state, settings)
+    n, ns = rows.n, state.theta.size
+    out_theta, out_var, out_nis = np.zeros((n, ns)), np.zeros((n, ns)), np.zeros(n)
     out_event = np.zeros(n, dtype=np.int64)
+    out_offset = np.zeros((n if settings.com_offset else 0, 2))
     events = np.zeros((settings.max_events, kern.E_NCOLS))
     k = settings.constants(nominal, rows.dt)
     count = kern.track_rows(np.ascontiguousarray(rows.phi), rows.z, rows.kind.astype(np.int64), k, state.theta,
                             state.P, state.R, state.n_rows, state.g, state.Iw, state.bw, state.start, out_theta,
-                            out_var, out_nis, out_event, events, 0)
-    found = []
-    late = rows.lookahead * rows.dt
-    for e in events[:min(count, settings.max_events)]:
-        found.append(ChangeEvent(TRACKED[int(e[kern.E_PARAM])], float(rows.t[int(e[kern.E_K])] + late),
-                                 float(rows.t[int(e[kern.E_START])] - rows.group_delay), int(e[kern.E_SIGN]),
-                                 float(e[kern.E_BEFORE]), math.sqrt(e[kern.E_BEFORE_VAR]), float(e[kern.E_AFTER]),
-                                 math.sqrt(e[kern.E_AFTER_VAR]), source))
-    return out_theta, out_var, out_nis, out_event, found
+                            out_var, out_nis, out_event, out_offset, events, 0)
+    raw = events[:min(count, settings.max_events)][:, [kern.E_K, kern.E_START, kern.E_PARAM, kern.E_SIGN, kern.E_BEFORE,
+                                                      kern.E_BEFORE_VAR, kern.E_AFTER, kern.E_AFTER_VAR]]
+    return TrackerRun(out_theta, out_var, out_nis, out_event, change_events(rows, raw, source), out_offset)
