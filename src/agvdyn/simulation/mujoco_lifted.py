@@ -16,7 +16,7 @@ import numpy as np
 from agvdyn.platform import WHEELS, Parameters
 from agvdyn.simulation._lifted_kernels import lifted_drive_sample
 from agvdyn.simulation._setup import prepare_run, run_chunks
-from agvdyn.simulation.mujoco_plant import MujocoVehicle, _id, _mujoco
+from agvdyn.simulation.mujoco_plant import MujocoVehicle, _id, _mujoco, sample_substeps
 from agvdyn.simulation.result import SimulationResult
 
 __all__ = ["lifted_model", "simulate_lifted_mujoco", "LIFT_HEIGHT"]
@@ -55,11 +55,7 @@ def simulate_lifted_mujoco(traj, vehicle: MujocoVehicle, controller_params: Para
     model = lifted_model(vehicle)
     data = mujoco.MjData(model)
     Ts = settings.sample_time
-    substeps = int(round(Ts / model.opt.timestep))
-    if substeps < 1 or abs(substeps * model.opt.timestep - Ts) > 1e-9 * Ts:
-        raise ValueError(f"MuJoCo timestep {model.opt.timestep} s: expected the sample time {Ts} s divided by a "
-                         "whole number")
-    model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_ENERGY)
+    substeps = sample_substeps(model, Ts)
     src = str(vehicle.source or "generated MJCF")
     steer = [int(model.jnt_qposadr[_id(model, "joint", f"steer_{w}", src)]) for w in ("fl", "fr")]
     steer_v = [int(model.jnt_dofadr[_id(model, "joint", f"steer_{w}", src)]) for w in ("fl", "fr")]

@@ -293,6 +293,17 @@ def _tyre_friction(model, source: str) -> tuple[np.ndarray, np.ndarray, bool]:
     return geoms, model.geom_friction, False
 
 
+def sample_substeps(model, sample_time: float) -> int:
+    """MuJoCo steps per sample (the sample time a whole multiple of the model's timestep, else a
+    ValueError naming both); also turns on MuJoCo's energy (the runs record it)."""
+    substeps = int(round(sample_time / model.opt.timestep))
+    if substeps < 1 or abs(substeps * model.opt.timestep - sample_time) > 1e-9 * sample_time:
+        raise ValueError(f"MuJoCo timestep {model.opt.timestep} s: expected the sample time {sample_time} s divided "
+                         "by a whole number")
+    model.opt.enableflags |= int(_mujoco().mjtEnableBit.mjENBL_ENERGY)
+    return substeps
+
+
 def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray, patches: np.ndarray,
                    energy: np.ndarray, truths: list | None = None) -> Callable[[int, int], None]:
     """``step(k0, k1)`` for :func:`agvdyn.simulation._setup.run_chunks`: samples k0..k1-1 on MuJoCo.
@@ -315,11 +326,7 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
         model = vehicle.model()
     data = mujoco.MjData(model)
     Ts = settings.sample_time
-    substeps = int(round(Ts / model.opt.timestep))
-    if substeps < 1 or abs(substeps * model.opt.timestep - Ts) > 1e-9 * Ts:
-        raise ValueError(f"MuJoCo timestep {model.opt.timestep} s: expected the sample time {Ts} s divided by "
-                         "a whole number")
-    model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_ENERGY)
+    substeps = sample_substeps(model, Ts)
     if model.jnt_qposadr[_id(model, "joint", "root", "model")] != 0:
         raise ValueError("MJCF: the free joint 'root' of the chassis must be the model's first joint")
     src = str(vehicle.source or "generated MJCF")
