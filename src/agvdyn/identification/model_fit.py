@@ -15,6 +15,8 @@ profile of a searched nonlinear value, BIC).
 """
 from __future__ import annotations
 
+from typing import Any
+
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -28,7 +30,7 @@ from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, FRICTION_GROUPS, ST
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["UNOBSERVABLE", "hold_unobservable", "with_unobservable", "extension_estimates", "breakaway_warnings",
-           "unsupported_breakaway", "MIN_SUPPORT_ROWS",
+           "unsupported_breakaway", "held_parameters", "MIN_SUPPORT_ROWS",
            "noisy_extensions", "residual_sums", "linear_values"]
 
 
@@ -77,9 +79,9 @@ def extension_estimates(model: ModelSpec, names: Sequence[str], theta: np.ndarra
         extra.update(zip(STRIBECK_NAMES, model.stribeck_velocities))
     if model.com_offset:
         m = value["m_ch"]
-        for name in CENTRE_NAMES:
-            extra[name] = value[name] / m
-            extra_std[name] = _ratio_std(name, value[name], m, free, cov, std)
+        for name in CENTRE_NAMES:  # m_ch held at 0 (no chassis rows): no offset to speak of
+            extra[name] = value[name] / m if m != 0 else 0.0
+            extra_std[name] = _ratio_std(name, value[name], m, free, cov, std) if m != 0 else math.inf
     return extra, extra_std
 
 
@@ -130,6 +132,16 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
 
 
 _GROUP_NAMES = {"l": "left steering", "r": "right steering", "w": "wheels"}
+
+
+def held_parameters(model: ModelSpec, ident: Any) -> tuple[str, ...]:
+    """The parameters of ``model`` a fit reports without estimating them (unbounded by design, not for
+    want of data in this log): those no motion mode of the vehicle shows (:data:`UNOBSERVABLE`: x_c)
+    and the breakaway levels of groups without rows in their Stribeck range (:func:`unsupported_breakaway`,
+    at the paper's law). Model selection neither counts them as parameters nor lets them keep a model
+    from being chosen."""
+    held = tuple(n for n in UNOBSERVABLE if n in model.linear_names)
+    return held + tuple(unsupported_breakaway(ident.model, ident.rows.stribeck_support))
 
 
 def breakaway_warnings(extra: Mapping[str, float], extra_std: Mapping[str, float], parameters: Parameters,

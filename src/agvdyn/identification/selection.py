@@ -49,7 +49,7 @@ import numpy as np
 
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.fit import fit_blocks
-from agvdyn.identification.model_fit import breakaway_warnings, linear_values
+from agvdyn.identification.model_fit import breakaway_warnings, held_parameters, linear_values
 from agvdyn.identification.model_search import (
     DELAY,
     ModelFit,
@@ -286,13 +286,15 @@ def _refit(model: ModelSpec, geometry: Any, fixed: Mapping[str, float], settings
 
 def _undetermined(model: ModelSpec, ident: Any, limit: float) -> tuple[str, ...]:
     """What the data leave undetermined in a fit of ``model``: added parameters without a finite std
-    (the delay's: ``delay_std_s``), breakaway levels and paper parameters whose std exceeds ``limit``
-    of their value (the extension's columns nearly collinear with theirs)."""
+    (the delay's: ``delay_std_s``; not those held by design, :func:`held_parameters`), breakaway levels
+    and paper parameters whose std exceeds ``limit`` of their value (the extension's columns nearly
+    collinear with theirs)."""
     def finite(x: float | None) -> bool:
         return x is not None and math.isfinite(x)
 
-    stds = {**ident.extra_std, DELAY: ident.delay_std_s}
-    out = [n for n in added_parameters(model) if not finite(stds.get(n))]
+    held = held_parameters(model, ident)
+    stds = {**{n: v for n, v in ident.extra_std.items() if n not in held}, DELAY: ident.delay_std_s}
+    out = [n for n in added_parameters(model) if n not in held and not finite(stds.get(n))]
     values = {**{n: getattr(ident.parameters, n) for n in ident.std}, **ident.extra}
     weak = [n for n, sd in {**ident.std, **{n: stds[n] for n in BREAKAWAY_NAMES if n in stds}}.items()
             if n not in out and (not finite(sd) or sd > limit * abs(values[n]))]
@@ -345,7 +347,7 @@ class _Scoring:
         self.found[model] = ({n: v for n, v in searched_values(ident.model).items() if n in added_parameters(model)},
                              fit)
         error = _rejected(ident, settings.fit.plausibility)
-        k = len(ident.std) + len(ident.offsets_std) + len(added_parameters(model))
+        k = len(ident.std) + len(ident.offsets_std) + len(added_parameters(model)) - len(held_parameters(model, ident))
         bic, j, _ = information_bic(ident.residual_ss, k, self.steps, self.reference)
         rss, rows = (sum(v) for v in zip(*ident.residual_ss.values()))
         refit = _refit(ident.model, self.geometry, self.options["fixed"], settings, self.options["estimator"])
