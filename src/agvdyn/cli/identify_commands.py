@@ -1,6 +1,7 @@
 """Commands ``agvdyn identify``, ``agvdyn validate`` and ``agvdyn report`` (paper sec. 6.2-7)."""
 from __future__ import annotations
 
+import inspect
 import json
 import math
 from pathlib import Path
@@ -112,6 +113,15 @@ def _settings(*, filtering: str = D.FILTERING, cutoff: float = D.CUTOFF, order: 
         raise fail(str(exc)) from exc
 
 
+def settings_of(options: dict) -> "IdentificationSettings":  # noqa: F821
+    """The identification settings of a command's options (its ``locals()``): those of them that
+    :func:`_settings` takes, the others left at their defaults."""
+    return _settings(**{k: v for k, v in options.items() if k in _SETTING_OPTIONS})
+
+
+_SETTING_OPTIONS = frozenset(inspect.signature(_settings).parameters)
+
+
 def _identified(paths: list[Path], platform: Optional[Path], mapping: Optional[Path], fixed, settings,
                 experiment: str = "auto", search=None, **options):
     """The logs opened (read one at a time, a long one in pieces: memory does not grow with their number
@@ -194,12 +204,7 @@ def identify(
     refuse_overwrite({"--out": out}, {**log_inputs("LOG", logs), "--platform": platform, "--mapping": mapping,
                                       **log_inputs("--validation", [validation])}, kinds={"--out": "parameter file"})
     fixed = _fixed(fix)
-    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
-                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
-                         steering_guard=steering_guard, segments=segments, slip_threshold=slip_threshold,
-                         torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
-                         max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
-                         uncertainty=uncertainty, bandwidth=bandwidth)
+    settings = settings_of(locals())
     search = M.search_of(model, compare_models, delay_range, stribeck_range, validation, mapping, platform, settings)
     ident = _identified(logs, platform, mapping, fixed, settings, experiment, search, keep_blocks=False, workers=threads)
     ident, selection = ident if isinstance(ident, tuple) else (ident, None)
@@ -278,9 +283,7 @@ def validate(
     from agvdyn.platform import PROTOTYPE, platform_of_parameters, read_parameters, read_platform
     from agvdyn.validation import validate as validate_log
 
-    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
-                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
-                         steering_guard=steering_guard)
+    settings = settings_of(locals())
     try:
         content = read_parameters(params)
         override = None if platform is None else read_platform(platform)

@@ -13,7 +13,7 @@ from agvdyn.cli import _defaults as D
 from agvdyn.cli.identify_commands import (
     BandwidthOpt, CutoffOpt, EstimatorOpt, FilteringOpt, FixOpt, GuardOpt, JsonOpt, MappingOpt, MaxInflationOpt,
     MaxRelativeStdOpt, OffsetsOpt, OrderOpt, PlatformOpt, SegmentsOpt, SlipThresholdOpt, SteeringGuardOpt,
-    SteeringStictionOpt, StictionOpt, TorqueLeadOpt, UncertaintyOpt, UnexcitedOpt, _fixed, _load, _settings,
+    SteeringStictionOpt, StictionOpt, TorqueLeadOpt, UncertaintyOpt, UnexcitedOpt, _fixed, _load, settings_of,
 )
 
 
@@ -75,12 +75,7 @@ def report(
                                "--tracking": tracking},
                      kinds)
     fixed = _fixed(fix)
-    settings = _settings(filtering=filtering, cutoff=cutoff, order=order, stiction=stiction,
-                         steering_stiction=steering_stiction, stiction_guard=stiction_guard,
-                         steering_guard=steering_guard, segments=segments, slip_threshold=slip_threshold,
-                         torque_lead=torque_lead, offsets=offsets, max_inflation=max_inflation,
-                         max_relative_std=max_relative_std, estimator=estimator, unexcited=unexcited,
-                         uncertainty=uncertainty, bandwidth=bandwidth)
+    settings = settings_of(locals())
     try:
         ref = None if reference is None else reference_from_file(reference)
     except (ValueError, OSError) as exc:
