@@ -10,6 +10,11 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 EXPERIMENTAL := 'ignore:`[tool.setuptools.ext-modules]`'
 # sources of the optional extension agvdyn.ffcpp._core that `pip install -e` builds with CMake
 EXTENSION_SOURCES := cpp/CMakeLists.txt src/agvdyn/_ffbuild.py $(wildcard cpp/src/* cpp/include/agvdyn_ff/* cpp/python/*)
+# The kernels compiled ahead of time (agvdyn._aot_kernels, by numba.pycc): a command then does not import
+# numba (0.3-0.4 s per process). Rebuilt when a kernel source changes; without it (no C compiler) the
+# kernels run on numba's JIT, with the same results.
+AOT_INDEX := src/agvdyn/_aot_kernels.json
+KERNEL_SOURCES := $(shell grep -rl --include='*.py' njit src/agvdyn)
 
 # The second floating-point environment of `make test`: OpenBLAS's generic Prescott kernels instead of
 # the CPU's own, numba compiled for a generic x86-64 instead of the host CPU (other rounding, other
@@ -24,13 +29,17 @@ $(STAMP): pyproject.toml $(EXTENSION_SOURCES)
 	PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
-demo: $(STAMP)
+$(AOT_INDEX): $(STAMP) $(KERNEL_SOURCES)
+	$(BIN)/python -m agvdyn._aot_build --quiet || echo "agvdyn: kernels not compiled ahead of time (see above); numba's JIT runs them"
+
+demo: $(STAMP) $(AOT_INDEX)
 	$(BIN)/python -m agvdyn.demo
 
 # cpp first: on a fresh machine it installs the compiler that the extension of the install needs
 test: cpp browser $(STAMP)
 	$(BIN)/python -c "import agvdyn.ffcpp._core" 2>/dev/null || AGVDYN_REQUIRE_CPP=1 PYTHONWARNINGS=$(EXPERIMENTAL) $(BIN)/pip install --quiet --no-deps -e .
-	AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2
+	$(MAKE) --no-print-directory $(AOT_INDEX)
+	AGVDYN_REQUIRE_CPP=1 AGVDYN_REQUIRE_AOT=1 $(BIN)/python -m pytest -q -n 2
 	@echo "numerically sensitive tests (-m numerics) again under a second floating-point environment: $(FP_ENV2)"
 	$(FP_ENV2) AGVDYN_REQUIRE_CPP=1 $(BIN)/python -m pytest -q -n 2 -m numerics -p no:cacheprovider
 
@@ -53,4 +62,4 @@ bench: $(STAMP)
 	if [ -x $(CPP_BUILD)/ff_bench ]; then $(CPP_BUILD)/ff_bench; else echo "ff_bench: run make cpp first"; fi
 
 clean:
-	rm -rf $(VENV) build demo_output
+	rm -rf $(VENV) build demo_output $(AOT_INDEX) src/agvdyn/_aot_kernels*.so

@@ -24,7 +24,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "agvdyn"
 STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("platform", ("agvdyn", "agvdyn.platform", "agvdyn.segments_vocabulary", "agvdyn.time_base", "agvdyn._files",
                   "agvdyn._lazy", "agvdyn._memory", "agvdyn._numba_cache", "agvdyn._trig", "agvdyn._zero_phase",
-                  "agvdyn._filter_cache", "agvdyn._ffbuild")),
+                  "agvdyn._filter_cache", "agvdyn._ffbuild", "agvdyn._jit")),
     ("kinematics", ("agvdyn.kinematics", "agvdyn.odometry", "agvdyn.row_rules")),
     ("dynamics", ("agvdyn.dynamics", "agvdyn.dynamics_extended", "agvdyn.identifiability", "agvdyn.determinacy",
                   "agvdyn.ffcpp")),
@@ -37,7 +37,7 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("online", ("agvdyn.online",)),  # payload tracking: above identification (its row rules), issue 31
     ("validation", ("agvdyn.validation",)),
     ("report", ("agvdyn.report", "agvdyn.plots", "agvdyn.figure_data", "agvdyn.demo")),
-    ("cli", ("agvdyn.cli",)),  # the CLI may import anything
+    ("cli", ("agvdyn.cli", "agvdyn._aot_build")),  # the CLI may import anything
 )
 
 #: Imports allowed against the rules, each with its reason: (importer, imported) -> reason.

@@ -7,7 +7,7 @@ with n = +-1) and fdlibm's polynomial kernels (``__kernel_sin``, ``__kernel_cos`
 """
 from __future__ import annotations
 
-import numba
+from agvdyn._jit import njit
 
 __all__ = ["sincos_steering"]
 
@@ -17,7 +17,7 @@ _PIO2_2 = 6.07710050630396597660e-11  # second 33 bits of pi/2
 _PIO2_2T = 2.02226624879595063154e-21  # pi/2 - (_PIO2_1 + _PIO2_2)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _sin_kernel(x, tail):  # pragma: no cover - compiled
     """sin(x + tail) for |x| <= pi/4, |tail| << ulp(x) (fdlibm __kernel_sin)."""
     z = x * x
@@ -27,7 +27,7 @@ def _sin_kernel(x, tail):  # pragma: no cover - compiled
     return x - ((z * (0.5 * tail - v * r) - tail) - v * -1.66666666666666324348e-01)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _cos_kernel(x, tail):  # pragma: no cover - compiled
     """cos(x + tail) for |x| <= pi/4 (fdlibm __kernel_cos)."""
     z = x * x
@@ -39,7 +39,7 @@ def _cos_kernel(x, tail):  # pragma: no cover - compiled
     return w + (((1.0 - w) - hz) + (z * r - x * tail))
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _minus_half_pi(x):  # pragma: no cover - compiled
     """``x - pi/2`` for x in [pi/4, pi/2] as head + tail (fdlibm's reduction, n = 1)."""
     t = x - _PIO2_1  # exact
@@ -49,7 +49,7 @@ def _minus_half_pi(x):  # pragma: no cover - compiled
     return head, (r - head) - w
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def sincos_steering(x):  # pragma: no cover - compiled
     """``(sin(x), cos(x))`` for ``|x| <= pi/2`` (a steering angle clipped to its stops)."""
     if x > _QUARTER_PI:

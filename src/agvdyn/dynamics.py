@@ -7,9 +7,9 @@ coordinates ``(x_ch, y_ch, gamma_ch, alpha_l, alpha_r, beta_fl, beta_rl, beta_fr
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn.kinematics import (
     MODE_TOLERANCE,
     N_Q,
@@ -154,7 +154,7 @@ def projected_regressor(geom: Geometry, mode, alpha, q_dot, q_ddot, *, epsilon: 
     return out
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _project_into(H, qd, qdd, tanh_a, tanh_w, out):  # pragma: no cover - compiled
     """One sample of H^T Theta ``(k, 11)`` from the nonzero entries of Theta, eq. (16) and (19)."""
     for c in range(H.shape[1]):
@@ -176,7 +176,7 @@ def _project_into(H, qd, qdd, tanh_a, tanh_w, out):  # pragma: no cover - compil
         out[c, 8], out[c, 9], out[c, 10] = dv, dc, bw
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _tanh_terms(qd, epsilon, tanh_a, tanh_w):  # pragma: no cover - compiled
     tanh_a[0] = np.tanh(qd[3] / epsilon)
     tanh_a[1] = np.tanh(qd[4] / epsilon)
@@ -184,7 +184,7 @@ def _tanh_terms(qd, epsilon, tanh_a, tanh_w):  # pragma: no cover - compiled
         tanh_w[i] = np.tanh(qd[5 + i] / epsilon)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _project_constant(H, qd, qdd, epsilon, out):  # pragma: no cover - compiled
     tanh_a, tanh_w = np.empty(2), np.empty(4)
     for j in range(qd.shape[0]):
@@ -192,7 +192,7 @@ def _project_constant(H, qd, qdd, epsilon, out):  # pragma: no cover - compiled
         _project_into(H, qd[j], qdd[j], tanh_a, tanh_w, out[j])
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _project_car_like(l, b, a, r, limit, alpha, qd, qdd, epsilon, tolerance, out):  # pragma: no cover - compiled
     """H_2^T Theta for every sample; returns the first row off the ICR relation, or -1."""
     k = b / l

@@ -14,9 +14,9 @@ matrix) give all four fits from the full one, per row, without a loop over candi
 Two wheels slipping at once are both reported, with less exact speeds."""
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn.kinematics import as_alpha, constraint_matrix_into
 from agvdyn.kinematics.constraints import _rows
 from agvdyn._numba_cache import drop_stale_cache
@@ -28,7 +28,7 @@ from agvdyn.platform import Geometry
 __all__ = ["odometry", "odometry_with_slip", "wheel_slip_row"]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def wheel_slip_row(A, P, rhs, e, slip, j):  # pragma: no cover - compiled
     """Slip speed of each contact point of row j (leave one wheel out, see the module docstring)
     into ``slip[j]``: ``A`` (8, >= 3) rows of eq. (1)-(2) (lateral rows 0-3, longitudinal 4-7, wheel
@@ -74,7 +74,7 @@ def wheel_slip_row(A, P, rhs, e, slip, j):  # pragma: no cover - compiled
             slip[j, w] = np.sqrt(lat * lat + lon * lon)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _odometry(l, b, a, r, alpha, alpha_dot, beta_dot, slip):  # pragma: no cover - compiled
     n = alpha.shape[0]
     out = np.empty((n, 3))

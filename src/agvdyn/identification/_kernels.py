@@ -19,9 +19,9 @@ for the order of a few sums); ``tests/test_kernels.py`` compares them.
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn import _trig
 from agvdyn._trig import sincos_steering
@@ -36,7 +36,7 @@ __all__ = ["stretch_motion", "stretch_modes", "stretch_projection", "kept_rows",
 
 #: Channels of the second filter: the 21 entries of Theta and the 4 motor torques.
 SIGNAL_CHANNELS = 25
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
     """Row i of column c of ``np.gradient(x, dt, axis=0, edge_order=2)`` (``half_rate = 0.5 / dt``:
     a product instead of numpy's division inside, equal to the last bit or one unit of it)."""
@@ -48,7 +48,7 @@ def _derivative(x, i, c, dt, half_rate):  # pragma: no cover - compiled
     return (x[i + 1, c] - x[i - 1, c]) * half_rate
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _odometry_row(j, al, ar, l, b, a, r, qd, trig, A, rhs, rates, slip_rhs, P):  # pragma: no cover - compiled
     """Chassis velocities of eq. (3) of row j, as ``agvdyn.odometry._odometry`` (the rows of eq. 1-2
     without their zeros; same sums); ``slip_rhs`` the right-hand side of the same rows with the
@@ -110,7 +110,7 @@ def stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, tr
     _scatter_friction(arg, sig)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _scatter_friction(arg, sig):  # pragma: no cover - compiled
     """The friction entries ``tanh(q_dot / eps)`` (n, 6) into their columns 5, 8, 17-20 of ``sig``."""
     for j in range(arg.shape[0]):
@@ -119,7 +119,7 @@ def _scatter_friction(arg, sig):  # pragma: no cover - compiled
             sig[j, 17 + w] = arg[j, 2 + w]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def copy_rows(dst, src):  # pragma: no cover - compiled
     """``dst[:] = src`` for 2-D arrays of any strides (numpy's strided copy of a few columns is 2x slower)."""
     for i in range(src.shape[0]):
@@ -127,7 +127,7 @@ def copy_rows(dst, src):  # pragma: no cover - compiled
             dst[i, j] = src[i, j]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, trig, qd, slip, sig,
                     arg):  # pragma: no cover - compiled
     """One filtered stretch: ``f`` (n, 6) filtered (alpha_l, alpha_r, beta_fl..rr), ``fast`` (n, 2)
@@ -190,7 +190,7 @@ def _stretch_motion(f, fast, wheels, dt, l, b, a, r, eps, torque, lead, alpha, t
                 sig[j, 21 + w] = (1.0 - lead) * torque[j, w] + lead * torque[j - 1, w]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def stretch_modes(alpha, trig, qd, k_icr, limit, tol, nominal, h1, r, rest_speed, steering_rate, mode, av):
     # pragma: no cover - compiled
     """Mode of each row (1..5, 0 = in no mode of the model) as ``rows.row_modes``; ``nominal``
@@ -232,7 +232,7 @@ def stretch_modes(alpha, trig, qd, k_icr, limit, tol, nominal, h1, r, rest_speed
         mode[j] = m
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _project_row(H, dof, sig, torque, j, i_G, Y, tau):  # pragma: no cover - compiled
     """Row j of ``H_k^T Theta`` (dof, 11) from the entries of Theta ``sig[j]`` and ``H_k^T B u``
     (dof,) from the torques ``torque[j]``, as ``agvdyn.dynamics.project_signals``."""
@@ -257,7 +257,7 @@ def _project_row(H, dof, sig, torque, j, i_G, Y, tau):  # pragma: no cover - com
         tau[j, c] = i_G * u
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thresholds, usable, mine, guards,
                        l, b, a, r, limit, i_G, Y, tau, s_dot, keep, offsets, runs):  # pragma: no cover
     """Rows of eq. (19) of every run of one mode (mode != 0 with a usable row of its own) of a
@@ -335,7 +335,7 @@ def stretch_projection(mode, av, qd, sig, torque, h_const, pinv_const, dofs, thr
     return n_runs
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def kept_rows(regressor, extra, torque, keep, sample, coord, slot_key, column, out, key, step,
               group, by_key, cursor, nonzero):  # pragma: no cover - compiled
     """Write the kept rows of one block's coordinate slots to ``out`` (m, 11 + q + 1): the
@@ -371,7 +371,7 @@ def kept_rows(regressor, extra, torque, keep, sample, coord, slot_key, column, o
     return k
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def recording_breaks(t, alpha, beta, max_step, max_steering_step, max_wheel_step, kind):  # pragma: no cover
     """Where a log's recording is not continuous: ``kind[i]`` (n - 1,) is 1 for a time step above
     ``max_step``, else 2 for a steering angle step above ``max_steering_step``, else 3 for a wheel

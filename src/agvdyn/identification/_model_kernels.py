@@ -13,9 +13,9 @@ Runs only when a model has such columns: the paper's rows never enter it.
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.kinematics import car_like_model_into, constraints, models
 
@@ -24,7 +24,7 @@ drop_stale_cache(__file__, constraints.__file__, models.__file__)
 __all__ = ["model_projection"]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _model_row(H, dof, sig, extra, j, stribeck, com, turning, Y, X):  # pragma: no cover - compiled
     """Row j's extension columns ``X[j, c]`` from the filtered signals ``sig[j]`` (entries of Theta)
     and ``extra[j]`` (``e tanh`` of the six joints when ``stribeck``, then ``w^2`` when ``com``);
@@ -51,7 +51,7 @@ def _model_row(H, dof, sig, extra, j, stribeck, com, turning, Y, X):  # pragma: 
             X[j, c, col] = X[j, c, col + 1] = 0.0
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def model_projection(mode, av, runs, count, sig, extra, h_const, dofs, l, b, a, r, limit, stribeck, com, Y, X):
     # pragma: no cover - compiled
     """The extension columns ``X`` (n, 2, q) of the rows of the ``count`` runs ``runs`` (start, stop)

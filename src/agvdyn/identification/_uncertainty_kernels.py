@@ -9,13 +9,14 @@ recordings run in threads:
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from agvdyn._jit import njit
 
 __all__ = ["block_moments", "block_changes", "step_scores"]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def block_moments(block, A, w, y, first, out, count, coef=None):  # pragma: no cover - compiled
     """Add ``w_i a_i^T [a_i | y_i]`` of every row i of ``A`` (m, p; a view of any strides) to
     ``out[block[i] - first]`` (nb, p, p + 1) and count the rows of each block in ``count`` (nb,);
@@ -44,7 +45,7 @@ def block_moments(block, A, w, y, first, out, count, coef=None):  # pragma: no c
                 out[j, a, b] += wa * row[b]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def block_changes(half, G, S, limit, M, x, trace):  # pragma: no cover - compiled
     """For blocks with Grams ``G`` (nb, p, p) and score sums ``S`` (nb, p) and ``half`` = B^1/2:
     ``M[b] = half G_b half`` (symmetrised), ``trace[b]`` its trace and ``x[b] = half S_b``; where
@@ -107,7 +108,7 @@ def block_changes(half, G, S, limit, M, x, trace):  # pragma: no cover - compile
     return any_high
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def step_scores(A, y, w, coef, idx, out):  # pragma: no cover - compiled
     """Add the score ``a_i w_i (y_i - a_i coef)`` of every row i of ``A`` (m, p; any strides) to
     ``out[idx[i]]`` (T, p); rows with ``idx[i] >= T`` are left out."""

@@ -14,9 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn.identification.settings import IdentificationSettings
 from agvdyn.platform import WHEELS
 from agvdyn.signals import row_max_abs, runs
@@ -27,7 +27,7 @@ __all__ = ["SlipEvent", "slip_threshold", "slip_rows", "median_and_mad"]
 MAD_SCALE = 1.4826
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def median_and_mad(x):  # pragma: no cover - compiled
     """``(median(x), median(|x - median(x)|))`` of a 1-D array, as numpy's, without the GIL (two
     medians of a log's slip speeds held it ~1 ms per log while another thread waited)."""

@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn.platform import Geometry
 
 #: Tolerance (rad) on the steering angles of eq. (9) when a measured configuration is assigned
@@ -112,7 +112,7 @@ def wheel_headings(geom: Geometry, alpha: np.ndarray) -> np.ndarray:
     return alpha[:, _SIDE] * geom.heading_sign
 
 
-@numba.njit(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def wheel_frame(i, l, b):  # pragma: no cover - compiled
     """Wheel i (fl, rl, fr, rr) of eq. (1)-(2): on the left, sigma (+1 front, -1 rear), side (+1
     left, -1 right) and its mounting point (cx, cy) in the chassis frame."""
@@ -122,7 +122,7 @@ def wheel_frame(i, l, b):  # pragma: no cover - compiled
     return left, sigma, side, (l / 2 if i % 2 == 0 else -l / 2), (b / 2 if left else -b / 2)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def constraint_matrix_into(l, b, a, radii, alpha_l, alpha_r, A):  # pragma: no cover - compiled
     """A(alpha) ``(8, 9)`` of eq. (1)-(2) for one configuration, written into ``A``.
 
@@ -142,7 +142,7 @@ def constraint_matrix_into(l, b, a, radii, alpha_l, alpha_r, A):  # pragma: no c
         A[4 + i, 5 + i] = -radii[i]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _constraint_matrices(l, b, a, r, alpha):  # pragma: no cover - compiled
     A = np.empty((alpha.shape[0], 8, 9))
     radii = np.full(4, r)
@@ -209,7 +209,7 @@ def _check_virtual(geom: Geometry, alpha_v) -> np.ndarray:
     return av
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def icr_state_trig(k, sin_l, cos_l, sin_r, cos_r):  # pragma: no cover - compiled
     """:func:`icr_state` from the sines and cosines of the steering angles (computed once by callers
     that need them for the constraints too)."""
@@ -218,14 +218,14 @@ def icr_state_trig(k, sin_l, cos_l, sin_r, cos_r):  # pragma: no cover - compile
     return 0.5 * (av_l + av_r), (av_l - av_r + np.pi / 2) % np.pi - np.pi / 2
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def icr_state(k, alpha_l, alpha_r):  # pragma: no cover - compiled
     """(alpha_v, residual) of one configuration, ``k = b/l``: inverse of eq. (8) per side, their
     mean, and the ICR residual of eq. (9) (difference of the two sides' values modulo pi)."""
     return icr_state_trig(k, np.sin(alpha_l), np.cos(alpha_l), np.sin(alpha_r), np.cos(alpha_r))
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _icr_states(k, alpha):  # pragma: no cover - compiled
     out = np.empty((alpha.shape[0], 2))
     for j in range(alpha.shape[0]):

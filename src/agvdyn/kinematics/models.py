@@ -5,9 +5,9 @@ Conventions as in :mod:`agvdyn.kinematics.constraints` (sample axis first).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from agvdyn._jit import njit
 from agvdyn.kinematics.constraints import (
     MODE_TOLERANCE,
     N_Q,
@@ -49,7 +49,7 @@ def _constant_model(geom: Geometry, mode: Mode) -> np.ndarray:
     return _column(geom, theta, np.array([twist]), np.zeros((1, 2))).T
 
 
-@numba.njit(cache=True, nogil=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def car_like_model_into(l, b, a, r, alpha_v, H, dH):  # pragma: no cover - compiled
     """H_2 and dH_2/d alpha_v ``(9, 2)`` at one virtual angle, written into ``H`` and ``dH`` (eq. 8, 11).
 
@@ -92,7 +92,7 @@ def car_like_model_into(l, b, a, r, alpha_v, H, dH):  # pragma: no cover - compi
         dH[5 + i, 1] = (sigma * d1 * (-st * vx + ct * vy) - ct * dkappa * cy + st * dkappa * cx - side * a * dkappa) / r
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _car_like_models(l, b, a, r, alpha_v):  # pragma: no cover - compiled
     n = alpha_v.shape[0]
     H = np.empty((n, 9, 2))

@@ -3,8 +3,8 @@ speed loop; the plant constants and friction are those of :mod:`._plant_kernels`
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from agvdyn._jit import njit
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.simulation import _kernels, _plant_kernels
 from agvdyn.simulation._kernels import read_sensors
