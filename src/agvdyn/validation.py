@@ -29,11 +29,13 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+
+from agvdyn._lazy import pandas as pd  # the table only: validating a log needs no pandas (~0.3 s of start-up)
 
 from agvdyn.identification import (EquationBlock, IdentificationSettings, load_logs, log_equations, log_rows,
                                    platform_for)
@@ -66,15 +68,16 @@ class Validation:
     parameters : the parameters validated (the paper's 11).
     blocks : equation blocks of the validation log (measured torques, regressor, stiction mask; the
         extensions' columns and delayed torques of an extended model).
-    table : per ``"segment:coordinate"``: ``nrmse`` (all rows), ``nrmse_moving`` (stiction rows
-        left out), ``rms_error``, ``rms_measured``, ``n_rows``, ``n_moving``.
+    rows : per ``"segment:coordinate"`` (``coordinate``): ``nrmse`` (all rows), ``nrmse_moving``
+        (stiction rows left out), ``rms_error``, ``rms_measured``, ``n_rows``, ``n_moving``; :attr:`table`
+        holds them as a DataFrame indexed by ``coordinate``.
     model : the model validated (:class:`~agvdyn.model_spec.ModelParameters`; the paper's model of
         ``parameters`` when not given).
     """
 
     parameters: Parameters
     blocks: tuple[EquationBlock, ...]
-    table: pd.DataFrame
+    rows: tuple[dict[str, Any], ...]
     settings: IdentificationSettings
     geometry: Geometry
     source: str = ""
@@ -90,15 +93,23 @@ class Validation:
         """Values of the extensions' columns of the blocks (``model.spec.linear_names``), None without."""
         return linear_values(self.model.spec, self.model.extra, self.parameters)
 
+    @cached_property
+    def table(self) -> pd.DataFrame:
+        """:attr:`rows` as a DataFrame indexed by ``coordinate`` (made on first use)."""
+        return pd.DataFrame(list(self.rows)).set_index("coordinate")
+
+    def _column(self, name: str) -> dict[str, Any]:
+        return {row["coordinate"]: row[name] for row in self.rows}
+
     @property
     def nrmse(self) -> dict[str, float]:
         """NRMSE per generalized coordinate over all rows (stiction rows included)."""
-        return self.table["nrmse"].to_dict()
+        return self._column("nrmse")
 
     @property
     def nrmse_moving(self) -> dict[str, float]:
         """NRMSE per generalized coordinate without the stiction rows."""
-        return self.table["nrmse_moving"].to_dict()
+        return self._column("nrmse_moving")
 
     def to_frame(self) -> pd.DataFrame:
         return self.table.copy()
@@ -124,7 +135,7 @@ class Validation:
             "nrmse": {k: clean(v) for k, v in self.nrmse.items()},
             "nrmse_without_stiction": {k: clean(v) for k, v in self.nrmse_moving.items()},
             "definition": "RMS(measured - model) / RMS(measured) per generalized coordinate",
-            "rows": {k: int(v) for k, v in self.table["n_rows"].items()},
+            "rows": {k: int(v) for k, v in self._column("n_rows").items()},
             "filtering": self.settings.rows.filtering.value,
             "notes": list(self.notes),
             "model": {"friction": self.model.spec.friction, "delay_s": self.model.delay_s,
@@ -148,7 +159,8 @@ def _row_model(model: ModelParameters) -> ModelSpec:
     return model.spec.replace(delay=model.delay_s, stribeck_velocities=velocities)
 
 
-def _table(blocks: Sequence[EquationBlock], p: np.ndarray, x: np.ndarray | None = None) -> pd.DataFrame:
+def _table_rows(blocks: Sequence[EquationBlock], p: np.ndarray, x: np.ndarray | None = None
+                ) -> tuple[dict[str, Any], ...]:
     pooled: dict[str, list[list[np.ndarray]]] = {}
     for b in blocks:
         model = b.model_torque(p, extra=x)
@@ -169,7 +181,7 @@ def _table(blocks: Sequence[EquationBlock], p: np.ndarray, x: np.ndarray | None 
             "n_rows": int(meas.size),
             "n_moving": int(keep.sum()),
         })
-    return pd.DataFrame(rows).set_index("coordinate")
+    return tuple(rows)
 
 
 def validate(log: Any, params: Parameters | ModelParameters | ParameterFile | str | os.PathLike,
@@ -205,8 +217,7 @@ def validate(log: Any, params: Parameters | ModelParameters | ParameterFile | st
         raise ValueError(f"{getattr(log, 'path', None) or '<log>'}: no row in a motion mode to validate on "
                          "(the chassis moves with steering angles of no mode of eq. 9, or stands still)")
     x = linear_values(model.spec, model.extra, parameters)
-    table = _table(blocks, parameters.to_vector(), x)
-    return Validation(parameters, tuple(blocks), table, settings, geometry,
+    return Validation(parameters, tuple(blocks), _table_rows(blocks, parameters.to_vector(), x), settings, geometry,
                       str(getattr(log, "path", None) or "<log>"), tuple(notes), model)
 
 

@@ -308,8 +308,8 @@ def validate(
         return
     columns = [Column("coordinate", "left"), Column("NRMSE"), Column("NRMSE w/o stiction rows"),
                Column("rows", drop=2), Column("rows moving", drop=1)]
-    rows = [[str(key), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), f"{int(row['n_rows']):,}",
-             f"{int(row['n_moving']):,}"] for key, row in val.table.iterrows()]
+    rows = [[str(row["coordinate"]), _nan_safe(row["nrmse"]), _nan_safe(row["nrmse_moving"]), f"{int(row['n_rows']):,}",
+             f"{int(row['n_moving']):,}"] for row in val.rows]  # val.rows, not val.table: no pandas
     console = Console(highlight=False)
     print_items(console, f"Validation on {log}:", ["NRMSE = RMS(measured - model) / RMS(measured)"])
     print_table(console, "", columns, rows)

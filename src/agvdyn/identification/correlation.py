@@ -8,7 +8,6 @@ import itertools
 from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
-import scipy.fft
 
 from agvdyn.identification._threads import ordered_map
 
@@ -67,6 +66,10 @@ def autocovariance_sums(x: np.ndarray, *, single: bool = False, fft_threads: int
     double precision unless ``single``. The one autocorrelation of the package: the correlation
     time of the scores here, the residuals' autocorrelation of the report
     (:func:`masked_autocorrelation`)."""
+    # here, not at the top: commands that read the package but take no autocorrelation skip scipy.fft's
+    # import (~0.2 s with scipy.special); numpy's FFT is not an equivalent: it computes single precision in double
+    import scipy.fft
+
     n = x.shape[0]
     x = np.ascontiguousarray(x.T, dtype=np.float32 if single else np.float64)
     size = scipy.fft.next_fast_len(2 * n, real=True)

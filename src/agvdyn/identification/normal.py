@@ -14,12 +14,10 @@ no single residual (``ols``, ``wls``, ``bounded``) solve on them the same proble
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg.lapack
 
 from agvdyn.dynamics import N_P
 from agvdyn.identification._kernels import kept_rows
@@ -116,27 +114,14 @@ def triangular_rows(rows: np.ndarray, size: int, old: np.ndarray | None = None,
     if old is not None:
         used |= np.abs(old).max(axis=0) > 0
     cols = np.flatnonzero(used)
-    # gathered column by column into a Fortran-ordered copy that LAPACK overwrites (no second copy)
+    # gathered column by column into a Fortran-ordered array (numpy's QR works on a copy of it)
     a = rows.T[cols].T if old is None else np.asfortranarray(np.vstack([rows[:, cols], old[:, cols]]))
     R = np.zeros((size, size))
     if a.shape[0] == 0 or cols.size == 0:
         return R
-    qr, _, _, info = scipy.linalg.lapack.dgeqrf(a, overwrite_a=True)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dgeqrf failed (info={info}) on a ({a.shape[0]}, {a.shape[1]}) block of rows")
-    k = min(a.shape)
-    upper = qr[:k]
-    upper[_below_diagonal(k, cols.size)] = 0.0
-    R[:k, cols] = upper
+    # numpy's QR is LAPACK's dgeqrf (the same R, bit for bit, as scipy's, without scipy.linalg's import)
+    R[:min(a.shape), cols] = np.linalg.qr(a, mode="r")
     return R
-
-
-@functools.lru_cache(maxsize=64)
-def _below_diagonal(rows: int, columns: int) -> np.ndarray:
-    """Mask of the entries below the diagonal of a (rows, columns) array (np.triu's zeros, cached)."""
-    mask = np.tri(rows, columns, -1, dtype=bool)
-    mask.flags.writeable = False
-    return mask
 
 
 @dataclass(frozen=True, eq=False)

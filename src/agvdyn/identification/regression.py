@@ -6,7 +6,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import base_parameters_of, triangular_factor
@@ -129,6 +128,8 @@ def variance_inflation(A: np.ndarray) -> np.ndarray:
 
     1 for a column orthogonal to the others, large when it is nearly a combination of them.
     """
+    import scipy.linalg  # here: the commands that read this module without fitting skip its import (~0.2 s)
+
     R = triangular_factor(A / column_norms(A))
     R_inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]))
     return np.einsum("ij,ij->i", R_inv, R_inv)

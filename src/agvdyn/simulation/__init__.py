@@ -17,7 +17,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd  # tables only (feedforward_table, the frames): simulating and writing a log need no pandas
 
 from agvdyn.platform import PAPER_PARAMETERS, PROTOTYPE, SAMPLE_TIME, WHEELS, Geometry, Parameters
 from agvdyn.simulation._kernels import run_chunk

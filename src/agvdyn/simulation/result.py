@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from agvdyn._lazy import pandas as pd  # tables only (feedforward_table, the frames): simulating and writing a log need no pandas
 
 from agvdyn.model_spec import FRICTION_GROUPS, ModelParameters, ModelSpec
 from agvdyn.odometry import odometry

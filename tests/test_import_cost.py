@@ -1,0 +1,96 @@
+"""Start-up of the commands as a user runs them (issue 28): each command, in a fresh interpreter, imports
+only the heavy libraries its work needs. An import hook records, for the first import of each scipy
+subpackage, pandas and matplotlib, whether agvdyn code asked for it (numba's own imports, e.g. of
+scipy.linalg.cython_blas when it loads kernels, are numba's start-up, not ours, and are left out).
+
+The default ``identify`` still needs scipy.linalg (the estimator's triangular solves: numpy's solve
+differs by an ulp, which the residuals' cancellation lifts to ~1e-10 in the stds), scipy.fft (the
+single-precision FFT of the correlation time: numpy's computes it in double) and scipy.special
+(Student's t quantile of the intervals); ``inspect`` needs scipy.linalg for its trial fit; ``validate``
+needs none of them, nor ``simulate`` (which still writes its log through pandas: marked xfail)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+#: run in the child: the CLI with an import hook; prints {module: agvdyn importer} of the heavy first imports
+_PROBE = r"""
+import json, sys, traceback
+HEAVY = ("pandas", "matplotlib", "scipy.")
+found = {}
+class Hook:
+    def find_spec(self, name, path=None, target=None):
+        if name in found or not (name in ("pandas", "matplotlib") or
+                                 (name.startswith("scipy.") and name.count(".") == 1 and not name.startswith("scipy._"))):
+            return None
+        stack = [f.filename for f in traceback.extract_stack()[:-1]]
+        if any("/numba/" in f or f.endswith("scipy/__init__.py") for f in stack):
+            return None  # numba's own start-up; scipy's own package (scipy.version: what the filter cache reads)
+        ours = [f for f in stack if "/agvdyn/" in f]
+        found[name] = ours[-1] if ours else "?"
+        return None
+sys.meta_path.insert(0, Hook())
+sys.argv = ["agvdyn", *sys.argv[1:]]
+from agvdyn.cli import main
+code = 0
+try:
+    main()
+except SystemExit as exc:
+    code = exc.code or 0
+print("IMPORTS " + json.dumps({"code": code, "found": {k: v for k, v in found.items() if v != "?"}}))
+"""
+
+#: what the default identify still needs (see the module docstring); everything else is a regression
+IDENTIFY_NEEDS = {"scipy.linalg", "scipy.fft", "scipy.special"}
+
+
+def _heavy_imports(args: list[str], cwd: Path) -> dict[str, str]:
+    out = subprocess.run([sys.executable, "-c", _PROBE, *args], capture_output=True, text=True, timeout=120,
+                         cwd=cwd)
+    lines = [line for line in out.stdout.splitlines() if line.startswith("IMPORTS ")]
+    assert lines, f"agvdyn {' '.join(args)} printed no report:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    report = json.loads(lines[-1][len("IMPORTS "):])
+    assert report["code"] == 0, f"agvdyn {' '.join(args)} failed:\n{out.stderr[-2000:]}"
+    return report["found"]
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory) -> tuple[Path, dict[str, str]]:
+    """A short identification run written by ``agvdyn simulate`` (itself probed) and its heavy imports."""
+    folder = tmp_path_factory.mktemp("import_cost")
+    found = _heavy_imports(["simulate", "identification", "--out", str(folder / "log.parquet"), "--quiet"], folder)
+    return folder, found
+
+
+@pytest.mark.xfail(strict=True, reason="the log is still written through a DataFrame (write_log: the checks, "
+                   "pa.Table.from_pandas and its metadata; the sidecar's tracking table): pandas at write time")
+def test_simulate_imports_neither_pandas_nor_scipy(simulated):
+    _, found = simulated
+    assert found == {}, f"simulate identification imported {found}"
+
+
+def test_identify_imports_only_what_the_default_fit_needs(simulated):
+    folder, _ = simulated
+    found = _heavy_imports(["identify", "log.parquet", "--out", "p.yaml"], folder)
+    assert set(found) <= IDENTIFY_NEEDS, f"identify imported {found}"
+    assert "pandas" not in found and "matplotlib" not in found
+
+
+def test_inspect_imports_only_the_trial_fits_linear_algebra(simulated):
+    folder, _ = simulated
+    found = _heavy_imports(["inspect", "log.parquet"], folder)
+    assert set(found) <= {"scipy.linalg"}, f"inspect imported {found}"  # the relative stds' trial fit (OLS)
+
+
+def test_validate_imports_neither_pandas_nor_scipy(simulated):
+    folder, _ = simulated
+    if not (folder / "p.yaml").exists():
+        _heavy_imports(["identify", "log.parquet", "--out", "p.yaml"], folder)
+    for args in (["validate", "log.parquet", "--params", "p.yaml"],
+                 ["validate", "log.parquet", "--params", "p.yaml", "--json"]):
+        found = _heavy_imports(args, folder)
+        assert found == {}, f"agvdyn {' '.join(args)} imported {found}"
