@@ -157,7 +157,7 @@ def build(quiet: bool = False) -> Path:
         kernels = harvested_kernels()
         cc = CC(MODULE)
         cc.output_dir = folder
-        cc.target_cpu = "host"
+        cc.target_cpu = os.environ.get("AGVDYN_AOT_CPU", "")  # "" numba's generic model of the architecture
         cc.verbose = False
         index, options_of = {}, {}
         for n, (qual, (dispatcher, entries)) in enumerate(sorted(kernels.items())):

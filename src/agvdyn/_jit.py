@@ -7,8 +7,10 @@ call whose argument types are among the compiled signatures runs the compiled co
 importing numba (numba's per-process start, 0.3-0.4 s, issue 28); any other call compiles the
 kernel with numba as before. Otherwise ``njit`` is ``numba.njit`` itself.
 
-The numerics are the same machine code path: numba compiles both (no fast-math, no contraction of
-multiply-adds), for the host CPU. ``AGVDYN_JIT=1`` (or numba's own ``NUMBA_CPU_NAME`` /
+The numbers are the same bit for bit: numba compiles both from the same source with the same
+options (no fast-math, no contraction of multiply-adds); the ahead-of-time module for the
+architecture's generic CPU model (``AGVDYN_AOT_CPU`` at build time for another), so it runs on any
+machine of the architecture. ``AGVDYN_JIT=1`` (or numba's own ``NUMBA_CPU_NAME`` /
 ``NUMBA_DISABLE_JIT``) forces numba's JIT for the process.
 """
 from __future__ import annotations
