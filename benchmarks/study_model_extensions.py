@@ -10,7 +10,9 @@ change with the same effect (seed 2000 + S) for validation. Fitted on the identi
   ``delay="auto"``, ``com_offset=True`` or ``friction="stribeck"`` searched; all three for ``all``);
 * ``auto``: :func:`agvdyn.identification.compare_models` with the lane change as its validation score
   (the mean NRMSE without stiction rows, as ``agvdyn identify --validation``), on the first
-  ``--compare-seeds`` seeds.
+  ``--compare-seeds`` seeds; its choice like with like (the default: two models compared on the
+  evidence rows of their difference, the chassis rows for the delay) and, from the same scores, the
+  choice on all rows (``chosen_all_rows``: the rule before, ``chosen_model(..., rows="all")``).
 
 Recorded per fit: the error of the paper's 10 parameters against the sidecar's truth (% and in std),
 the effect's recovery (delay in sample periods, y_c in cm -- x_c cancels in every motion mode and is
@@ -43,6 +45,7 @@ from typing import Any, Callable
 
 from agvdyn.identification import (IdentificationSettings, ImplausibleError, UnidentifiableError, compare_models,
                                    identify, identify_model)
+from agvdyn.identification.selection import chosen_model
 from agvdyn.io import load_logs
 from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.simulation import simulate
@@ -114,6 +117,8 @@ def auto_record(logs: list, truth: Any, lane: Any, paper: Any, settings: Identif
     ident = selection.identification
     rec = fit_record(ident, truth, lane, time.perf_counter() - t0)
     rec["chosen"] = selection.model.label
+    before, scores = chosen_model(list(selection.scores), rows="all")  # the same scores, compared on all rows
+    rec["chosen_all_rows"] = scores[before].label
     rec["candidates"] = [s.to_dict() for s in selection.scores]
     rec["correlation_steps"] = selection.correlation_steps
     rec["paper_change"] = None if paper is None else max(

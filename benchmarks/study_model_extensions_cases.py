@@ -129,6 +129,8 @@ def checks(rec: dict[str, Any], ref: dict[str, Any] | None = None) -> dict[str, 
     if auto is not None:
         wanted = "paper" if case.extension.is_paper else case.extension.label
         out[f"auto chooses {wanted}"] = "error" not in auto and auto["chosen"] == wanted
+        if "chosen_all_rows" in auto:
+            out[f"auto on all rows chooses {wanted}"] = auto["chosen_all_rows"] == wanted
         if case.extension.is_paper:
             out["auto: parameters unchanged"] = "error" not in auto and auto["paper_change"] is not None and auto["paper_change"] < 1e-12
     return out
@@ -211,7 +213,7 @@ def summary_table(records: dict[Key, dict[str, Any]], plant: str, rows: str) -> 
     """One line per case: the effect's recovery, the seeds meeting each check, auto's choices, and the
     lane-change NRMSE of the paper fit and of the extension's (medians)."""
     lines = [f"| case ({plant} plant, {rows} rows) | seeds | effect: median (worst) | meets (seeds) | auto chose | "
-             "lane NRMSE paper / extension |", "|---|---|---|---|---|---|"]
+             "auto on all rows chose | lane NRMSE paper / extension / auto |", "|---|---|---|---|---|---|---|"]
     for name in CASES:
         recs = sorted((r for k, r in records.items() if k[1:] == (name, plant, rows)), key=lambda r: r["seed"])
         if not recs:
@@ -223,14 +225,18 @@ def summary_table(records: dict[Key, dict[str, Any]], plant: str, rows: str) -> 
             got = [c[key] for c in results if c.get(key) is not None]
             meets.append(f"{key} {sum(got)}/{len(got)}")
         chosen: dict[str, int] = {}
+        before: dict[str, int] = {}
         for a in (r["fits"]["auto"] for r in recs if "auto" in r["fits"]):
             label = a.get("chosen") or a["error"].split(":")[0]
             chosen[label] = chosen.get(label, 0) + 1
+            if "chosen_all_rows" in a:
+                before[a["chosen_all_rows"]] = before.get(a["chosen_all_rows"], 0) + 1
         nrmse = [statistics.median([r["fits"][f]["lane_nrmse"]["mean"] for r in recs if f in r["fits"]
-                                    and "lane_nrmse" in r["fits"][f]] or [math.nan]) for f in ("paper", "extension")]
+                                    and "lane_nrmse" in r["fits"][f]] or [math.nan]) for f in ("paper", "extension", "auto")]
         lines.append(f"| {name} | {len(recs)} | {_effect_cell(recs, refs)} | {'; '.join(meets)} | "
                      f"{', '.join(f'{k} {v}' for k, v in chosen.items()) or '-'} | "
-                     f"{nrmse[0]:.4f} / {nrmse[1]:.4f} |".replace("nan", "-"))
+                     f"{', '.join(f'{k} {v}' for k, v in before.items()) or '-'} | "
+                     f"{nrmse[0]:.4f} / {nrmse[1]:.4f} / {nrmse[2]:.4f} |".replace("nan", "-"))
     return lines + [""]
 
 

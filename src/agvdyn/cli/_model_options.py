@@ -151,6 +151,8 @@ def _added(names) -> str:
 
 def print_selection(console, selection) -> None:
     """The comparison's table (80 columns: the parameters added are left out first) and the choice."""
+    from agvdyn.identification.selection_rows import comparison_note
+
     validated = any(s.nrmse_validation is not None for s in selection.scores)
     columns = [Column("model", "left"), Column("added", "left", drop=1), Column("residual RMS"),
                Column("held-out")] + ([Column("validation", drop=2)] if validated else []) + \
@@ -167,6 +169,8 @@ def print_selection(console, selection) -> None:
                 f"{selection.correlation_steps:.3g} steps; {selection.fits} fits)"], sep=" ")
     print_table(console, "", columns, rows)
     for s in selection.scores:
+        if comparison_note(s.versus_paper):
+            print_items(console, f"{s.label}:", [comparison_note(s.versus_paper)])
         if s.error:
             print_items(console, f"{s.label}: not kept:", [s.error.splitlines()[0]])
         elif s.undetermined:

@@ -27,15 +27,17 @@ Scores of a candidate:
 * ``nrmse_validation``: the caller's score on logs not used for the fit (``validation``, e.g. the
   CLI's ``--validation`` through :func:`agvdyn.validation.validate`); None without.
 
-BIC and held-out error sum all coordinates, the delay's search only the chassis rows
-(:func:`.model_search.delay_evidence`): where the steering rows carry stick-slip the tanh law lacks
-(our plant's default), they can keep a delay the chassis rows see from lowering the BIC.
+Like with like (:mod:`.selection_rows`): two models are compared on the rows where their difference is
+evidence. The scores above sum all coordinates (the table's figures); where two models differ by the
+delay alone, both are scored on the delay's evidence rows, those its search uses (the chassis rows,
+:func:`.model_search.delay_evidence`): the steering rows carry the steering joints' stick-slip, which the
+tanh law lacks and which looks like a torque lead, and would vote any real delay down on our plant.
 
 ``auto`` (:func:`chosen_model`): an extension passes when it lowers both the BIC and the held-out
-error of the paper's model and none of its parameters is undetermined (std ``inf``, or above
-``max_relative_std`` of the value for the breakaway levels and the paper's parameters) or
-implausible; several passing ones are combined and the combination is kept only when it lowers both
-again against the best single one.
+error of the paper's model on their comparison rows and none of its parameters is undetermined (std
+``inf``, or above ``max_relative_std`` of the value for the breakaway levels and the paper's parameters)
+or implausible; several passing ones are combined and the combination is kept only when it lowers both
+again against the best single one (the largest BIC gain over the paper's), on their comparison rows.
 """
 from __future__ import annotations
 
@@ -63,15 +65,14 @@ from agvdyn.identification.model_search import (
 )
 from agvdyn.identification.plausibility import ImplausibleError, implausible_parameters
 from agvdyn.identification.regression import UnidentifiableError
+from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, comparison_rows,
+                                                  holdout_nrmse, holdout_of_sums, holdout_parts)
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
 from agvdyn.io import Log, LogFile
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, DELAY_RANGE, STRIBECK_NAMES, STRIBECK_RANGE, ModelSpec
 
 __all__ = ["ModelScore", "ModelSelection", "compare_models", "candidate_models", "added_parameters", "holdout_nrmse",
-           "information_bic", "chosen_model", "HOLDOUT_PARTS"]
-
-#: Parts of each segment in the held-out error's cross-validation.
-HOLDOUT_PARTS = 4
+           "holdout_parts", "information_bic", "chosen_model", "versus", "HOLDOUT_PARTS"]
 
 #: A refit on blocks: returns the predictor of a block's model torques (n, n_k).
 Refit = Callable[[Sequence[EquationBlock]], Callable[[EquationBlock], np.ndarray]]
@@ -110,61 +111,15 @@ def information_bic(residual_ss: Mapping[str, tuple[float, int]], k: int, correl
     return j / correlation_steps + k * math.log(n_eff), j, n_eff
 
 
-def _parts(blocks: Sequence[EquationBlock], parts: int) -> dict[tuple[str, str], tuple[float, float]]:
-    """Per (source, segment): its first time and the length of each of its ``parts`` parts."""
-    span: dict[tuple[str, str], list[float]] = {}
-    for b in blocks:
-        if b.t.size:
-            lo, hi = span.setdefault((b.source, b.segment), [math.inf, -math.inf])
-            span[(b.source, b.segment)] = [min(lo, float(b.t[0])), max(hi, float(b.t[-1]))]
-    return {key: (lo, max(hi - lo, 1e-12) * (1 + 1e-9) / parts) for key, (lo, hi) in span.items()}
-
-
-def _fold_masks(b: EquationBlock, span: tuple[float, float], fold: int, gap_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of block ``b`` (n,) in part ``fold`` of its segment, and those the training may use
-    (outside the part by more than ``gap_s``)."""
-    first, length = span
-    start, stop = first + fold * length, first + (fold + 1) * length
-    held = (b.t >= start) & (b.t < stop)
-    distance = np.maximum(np.maximum(start - b.t, b.t - stop), 0.0)
-    return held, ~held & (distance > gap_s)
-
-
-def holdout_nrmse(blocks: Sequence[EquationBlock], refit: Refit, *, parts: int = HOLDOUT_PARTS,
-                  gap_s: float = 0.0) -> float:
-    """Held-out NRMSE by leave-one-part-out (see the module docstring): ``refit`` on the kept rows
-    outside part j (and more than ``gap_s`` seconds from it) returns a predictor of a block's model
-    torques; the NRMSE of the kept rows of part j is pooled per ``segment:coordinate`` over the
-    folds and averaged over the keys. NaN when no key has a measured torque."""
-    if isinstance(parts, bool) or not isinstance(parts, int) or parts < 2:
-        raise ValueError(f"parts={parts!r}: expected an integer >= 2 (parts of each segment held out in turn)")
-    spans = _parts(blocks, parts)
-    error: dict[str, float] = {}
-    measured: dict[str, float] = {}
-    for fold in range(parts):
-        masks = [_fold_masks(b, spans[(b.source, b.segment)], fold, gap_s) for b in blocks]
-        train = [b.with_keep(b.keep & use[:, None]) for b, (_, use) in zip(blocks, masks)]
-        predict = refit([b for b in train if b.keep.any()])
-        for b, (held, _) in zip(blocks, masks):
-            rows = b.keep & held[:, None]
-            if not rows.any():
-                continue
-            model = predict(b)
-            for j, coordinate in enumerate(b.coordinates):
-                r = rows[:, j]
-                key = f"{b.segment}:{coordinate}"
-                error[key] = error.get(key, 0.0) + float(np.sum((b.torque[r, j] - model[r, j]) ** 2))
-                measured[key] = measured.get(key, 0.0) + float(np.sum(b.torque[r, j] ** 2))
-    scores = [math.sqrt(error[k] / measured[k]) for k in error if measured[k] > 0]
-    return float(np.mean(scores)) if scores else math.nan
-
-
 @dataclass(frozen=True, eq=False)
 class ModelScore:
     """One candidate of :func:`compare_models`: the ``model`` asked (searches ``"auto"``), the
     ``fitted`` one (resolved), its scores (see the module docstring), ``k`` estimated parameters,
     ``undetermined``: added parameters whose std is infinite (never chosen), ``error``: why the fit
-    was refused (None), ``fits``: identifications made (searches and folds included)."""
+    was refused (None), ``fits``: identifications made (searches and folds included); per row class
+    (:meth:`on_rows`): ``residual_ss`` per coordinate group, ``holdout_sums`` per ``segment:coordinate``,
+    the ``correlation_steps`` and ``reference_rows`` of the BIC; ``versus_paper``: the comparison with
+    the paper's model that ``auto`` made (rows, both models' BIC and held-out error on them)."""
 
     model: ModelSpec
     fitted: ModelSpec | None = None
@@ -179,6 +134,11 @@ class ModelScore:
     chosen: bool = False
     fits: int = 0
     identification: Any = field(default=None, repr=False)
+    residual_ss: Mapping[str, tuple[float, int]] = field(default_factory=dict, repr=False)
+    holdout_sums: Mapping[str, tuple[float, float]] = field(default_factory=dict, repr=False)
+    correlation_steps: float = math.nan
+    reference_rows: Mapping[str, int] = field(default_factory=dict, repr=False)
+    versus_paper: dict[str, Any] | None = None
 
     @property
     def label(self) -> str:
@@ -187,6 +147,14 @@ class ModelScore:
     @property
     def parameters_added(self) -> tuple[str, ...]:
         return added_parameters(self.model)
+
+    def on_rows(self, groups: Sequence[str] | None) -> tuple[float, float]:
+        """``(BIC, held-out NRMSE)`` on the coordinate groups ``groups`` (:mod:`.selection_rows`); all rows
+        (``bic``, ``nrmse_holdout``) when None or without the per row class sums."""
+        if groups is None or not self.residual_ss or not self.holdout_sums:
+            return self.bic, self.nrmse_holdout
+        return (bic_on_rows(self.residual_ss, self.k, self.correlation_steps, self.reference_rows, groups),
+                holdout_of_sums(self.holdout_sums, groups))
 
     @property
     def usable(self) -> bool:
@@ -202,28 +170,44 @@ class ModelScore:
         return {"model": self.label, "parameters_added": list(self.parameters_added), "bic": clean(self.bic),
                 "nrmse_holdout": clean(self.nrmse_holdout), "nrmse_validation": clean(self.nrmse_validation),
                 "residual_rms": clean(self.residual_rms), "chosen": self.chosen,
-                "undetermined": list(self.undetermined), "error": self.error}
+                "undetermined": list(self.undetermined), "error": self.error,
+                "versus_paper": None if self.versus_paper is None else {
+                    k: (clean(v) if isinstance(v, float) else v) for k, v in self.versus_paper.items()}}
 
 
-def _better(a: ModelScore, b: ModelScore) -> bool:
-    """``a`` lowers both the BIC and the held-out error of ``b`` (and is usable)."""
-    return a.usable and a.bic < b.bic and a.nrmse_holdout < b.nrmse_holdout
+def versus(a: ModelScore, b: ModelScore, rows: str = "evidence") -> dict[str, Any]:
+    """The comparison of ``a`` with ``b``: the ``rows`` (coordinate groups, or ``"all"``;
+    :func:`.selection_rows.comparison_rows` when ``rows`` is ``"evidence"``), both BICs and held-out
+    errors on them, and whether ``a`` lowers both (and is usable)."""
+    if rows not in ROWS_CHOICES:
+        raise ValueError(f"rows={rows!r}: expected one of {list(ROWS_CHOICES)}")
+    groups = comparison_rows(a.model, b.model, b.residual_ss or a.residual_ss) if rows == "evidence" else None
+    (bic, holdout), (bic_b, holdout_b) = a.on_rows(groups), b.on_rows(groups)
+    return {"rows": "all" if groups is None else list(groups), "bic": bic, "bic_other": bic_b,
+            "nrmse_holdout": holdout, "nrmse_holdout_other": holdout_b,
+            "better": a.usable and math.isfinite(bic) and bic < bic_b and holdout < holdout_b}
 
 
-def chosen_model(scores: Sequence[ModelScore], combine: Callable[[ModelSpec], ModelScore] | None = None
-                 ) -> tuple[int, list[ModelScore]]:
+def _better(a: ModelScore, b: ModelScore, rows: str = "evidence") -> bool:
+    """``a`` lowers both the BIC and the held-out error of ``b`` on their comparison rows (and is usable)."""
+    return bool(versus(a, b, rows)["better"])
+
+
+def chosen_model(scores: Sequence[ModelScore], combine: Callable[[ModelSpec], ModelScore] | None = None,
+                 rows: str = "evidence") -> tuple[int, list[ModelScore]]:
     """``auto``'s choice among ``scores`` (the paper's model first, then single extensions): the
-    extensions that lower both BIC and held-out error against the paper's model pass; one passed:
-    it; several: their combination (``combine`` fits it, or the score of that model among
-    ``scores``), kept only when it lowers both against the best (lowest BIC) single one. Returns
-    the index of the choice in the (possibly extended) list of scores."""
+    extensions that lower both BIC and held-out error against the paper's model pass (on their
+    comparison rows, :func:`versus`; ``rows="all"``: all rows, the rule before like with like); one
+    passed: it; several: their combination (``combine`` fits it, or the score of that model among
+    ``scores``), kept only when it lowers both against the best single one (the largest BIC gain over
+    the paper's on its rows). Returns the index of the choice in the (possibly extended) list of scores."""
     scores = list(scores)
     paper = scores[0]
     singles = [s for s in scores[1:] if len(s.model.extensions) == 1]
-    passed = [s for s in singles if _better(s, paper)]
+    passed = [s for s in singles if _better(s, paper, rows)]
     if not passed:
         return 0, scores
-    best = min(passed, key=lambda s: s.bic)
+    best = min(passed, key=lambda s: (lambda v: v["bic"] - v["bic_other"])(versus(s, paper, rows)))
     if len(passed) == 1:
         return scores.index(best), scores
     spec = passed[0].model
@@ -239,7 +223,7 @@ def chosen_model(scores: Sequence[ModelScore], combine: Callable[[ModelSpec], Mo
             return scores.index(best), scores
         combo = combine(spec)
         scores.append(combo)
-    return (scores.index(combo) if _better(combo, best) else scores.index(best)), scores
+    return (scores.index(combo) if _better(combo, best, rows) else scores.index(best)), scores
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,11 +335,13 @@ class _Scoring:
         bic, j, _ = information_bic(ident.residual_ss, k, self.steps, self.reference)
         rss, rows = (sum(v) for v in zip(*ident.residual_ss.values()))
         refit = _refit(ident.model, self.geometry, self.options["fixed"], settings, self.options["estimator"])
+        held_out = holdout_parts(ident.blocks, refit, parts=self.parts, gap_s=self.gap_s)
         return ModelScore(model, ident.model, bic=bic, likelihood=j, k=k, residual_rms=math.sqrt(rss / rows),
-                          nrmse_holdout=holdout_nrmse(ident.blocks, refit, parts=self.parts, gap_s=self.gap_s),
+                          nrmse_holdout=holdout_of_sums(held_out),
                           undetermined=_undetermined(model, ident, settings.fit.max_relative_std), error=error,
                           nrmse_validation=None if self.validation is None else float(self.validation(ident)),
-                          fits=fit.fits + self.parts, identification=ident)
+                          fits=fit.fits + self.parts, identification=ident, residual_ss=dict(ident.residual_ss),
+                          holdout_sums=held_out, correlation_steps=self.steps, reference_rows=self.reference)
 
     def final(self, score: ModelScore) -> ModelScore:
         """The chosen extension refitted with the settings (refusals as ``identify`` makes them), the
@@ -375,7 +361,7 @@ def compare_models(logs: Any, platform: Any = None, *, validation: Callable[[Any
                    settings: IdentificationSettings = IdentificationSettings(), estimator: Any = None,
                    experiment: str = "auto", workers: int | None = None,
                    delay_range: tuple[float, float] = DELAY_RANGE, stribeck_range: tuple[float, float] = STRIBECK_RANGE,
-                   parts: int = HOLDOUT_PARTS) -> ModelSelection:
+                   parts: int = HOLDOUT_PARTS, rows: str = "evidence") -> ModelSelection:
     """Fit and score the paper's model, each extension alone and all together (:func:`candidate_models`;
     searches by :func:`.model_search.identify_model`), and choose as ``auto`` does (:func:`chosen_model`;
     a combination of several passing extensions is fitted when needed, its search started from theirs).
@@ -384,9 +370,12 @@ def compare_models(logs: Any, platform: Any = None, *, validation: Callable[[Any
     is fitted without refusals and judged: implausible values are its ``error``, parameters the data
     do not determine its ``undetermined``; either keeps it from being chosen. The chosen one is
     refitted with ``settings`` (its identification is what ``identify_model`` of it gives). The paper
-    model's refusal is raised. The other keywords are :func:`.pipeline.identify`'s."""
+    model's refusal is raised. ``rows``: the rows two models are compared on (:func:`versus`: ``"evidence"``,
+    like with like; ``"all"``). The other keywords are :func:`.pipeline.identify`'s."""
     from agvdyn.identification.pipeline import platform_for
 
+    if rows not in ROWS_CHOICES:
+        raise ValueError(f"rows={rows!r}: expected one of {list(ROWS_CHOICES)}")
     items = [logs] if isinstance(logs, (Log, LogFile)) else list(logs)
     items = [x.load() if isinstance(x, LogFile) and not x.long else x for x in items]  # read once, fitted often
     geometry = platform_for(items, platform)
@@ -402,11 +391,12 @@ def compare_models(logs: Any, platform: Any = None, *, validation: Callable[[Any
     scores = [scoring.score(paper, first)] + [scoring.score(m) for m in others[:-1]]
     scores.append(scoring.score(others[-1]))  # all together: its search starts from each one's alone
     while True:  # the choice refitted with the settings; refused there (as identify refuses): the next choice
-        index, scores = chosen_model(scores, combine=scoring.score)
+        index, scores = chosen_model(scores, combine=scoring.score, rows=rows)
         try:
             scores[index] = scoring.final(scores[index])
             break
         except (UnidentifiableError, ImplausibleError) as exc:
             scores[index] = dataclasses.replace(scores[index], error=f"refused with the settings: {exc}")
-    scores = [dataclasses.replace(s, chosen=k == index) for k, s in enumerate(scores)]
+    scores = [dataclasses.replace(s, chosen=k == index, versus_paper=None if k == 0 or s.error is not None
+                                  else versus(s, scores[0], rows)) for k, s in enumerate(scores)]
     return ModelSelection(tuple(scores), index, steps, sum(reference.values()) / steps, parts)

@@ -63,7 +63,9 @@ def _note(score: Any) -> str:
         return f"refused: {score.error}"
     if score.undetermined:
         return "undetermined: " + ", ".join(score.undetermined)
-    return ""
+    from agvdyn.identification.selection_rows import comparison_note
+
+    return comparison_note(score.versus_paper)
 
 
 def _chosen_values(ident: Any) -> dict[str, str]:
