@@ -71,14 +71,14 @@ int bench_tracker(double seconds, bool com_offset) {
   std::normal_distribution<double> noise(0.0, 1.0);
   const double pi = 3.14159265358979323846;
   for (std::size_t k = 0; k < n; ++k) {
-    const int kind = 1 + static_cast<int>((k / 512) % 6);
+    const int kind = 1 + static_cast<int>((k / 512) % ff::kRowKinds);  // every kind: 7, 8 car-like x_ch rows
     const double wave = std::sin(2 * pi * static_cast<double>(k) / 400.0);
     const double m = p.m_ch + (k >= n / 2 ? 300.0 : 0.0), C = p.C_ch + (k >= n / 2 ? 60.0 : 0.0);
     ff::TrackerRow& r = rows[k];
     r.kind = k % 16 == 15 ? ff::RowKind::none : static_cast<ff::RowKind>(kind);
-    r.phi_m = kind <= 4 ? 0.4 * wave : 0.0;
-    r.phi_C = kind >= 5 ? 1.0 * wave : 0.05 * wave;
-    r.phi_y = com_offset && kind <= 2 ? 0.3 * std::cos(2 * pi * static_cast<double>(k) / 400.0) : 0.0;
+    r.phi_m = (kind <= 4 || kind >= 7) ? 0.4 * wave : 0.0;
+    r.phi_C = (kind == 5 || kind == 6) ? 1.0 * wave : 0.05 * wave;
+    r.phi_y = com_offset && (kind <= 2 || kind >= 7) ? 0.3 * std::cos(2 * pi * static_cast<double>(k) / 400.0) : 0.0;
     r.z = r.phi_m * m + r.phi_C * C + r.phi_y * (k >= n / 2 ? 12.0 : 0.0) + 0.5 * kind + noise(rng);
   }
   ff::TrackerOutput out;

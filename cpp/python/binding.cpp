@@ -209,8 +209,8 @@ ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<d
   return tracker;
 }
 
-// The state as the arrays of agvdyn.online.tracker.TrackerState: theta (ns), P (ns, ns), R (3),
-// n_rows (9), g (2, 2), Iw (2, 2, ns, ns), bw (2, 2, ns), start (2, 2); CUSUM (i, s) is index 2 i + s;
+// The state as the arrays of agvdyn.online.tracker.TrackerState: theta (ns), P (ns, ns), R (4),
+// n_rows (12), g (2, 2), Iw (2, 2, ns, ns), bw (2, 2, ns), start (2, 2); CUSUM (i, s) is index 2 i + s;
 // ns = 8, 9 with com_offset (tracker.states()).
 void check_size(const char* name, std::size_t size, std::size_t expected) {
   if (size != expected) {
@@ -222,8 +222,8 @@ void check_size(const char* name, std::size_t size, std::size_t expected) {
 void check_state_sizes(std::size_t ns, Flat theta, Flat P, Flat R, Flat n_rows, Flat g, Flat Iw, Flat bw, Flat start) {
   check_size("theta", theta.size(), ns);
   check_size("P", P.size(), ns * ns);
-  check_size("R", R.size(), 3);
-  check_size("n_rows", n_rows.size(), 9);
+  check_size("R", R.size(), ff::kNoiseClasses);
+  check_size("n_rows", n_rows.size(), ff::kRowKinds + ff::kNoiseClasses);
   check_size("g", g.size(), 4);
   check_size("Iw", Iw.size(), 4 * ns * ns);
   check_size("bw", bw.size(), 4 * ns);
@@ -238,8 +238,8 @@ void load_state_of(ff::PayloadTracker& tracker, ff::TrackerStateOf<N> st, Flat t
     st.theta[p] = theta.data()[p];
     for (int q = 0; q < N; ++q) st.P(p, q) = P.data()[N * p + q];
   }
-  for (int k = 0; k < 3; ++k) st.R[k] = R.data()[k];
-  for (int k = 0; k < 9; ++k) st.n_rows[k] = n_rows.data()[k];
+  for (int k = 0; k < ff::kNoiseClasses; ++k) st.R[k] = R.data()[k];
+  for (int k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) st.n_rows[k] = n_rows.data()[k];
   for (int c = 0; c < 4; ++c) {
     st.g[static_cast<std::size_t>(c)] = g.data()[c];
     st.start[static_cast<std::size_t>(c)] = static_cast<std::int64_t>(start.data()[c]);
@@ -268,8 +268,8 @@ void store_state_of(const ff::TrackerStateOf<N>& st, Flat theta, Flat P, Flat R,
     theta.data()[p] = st.theta[p];
     for (int q = 0; q < N; ++q) P.data()[N * p + q] = st.P(p, q);
   }
-  for (int k = 0; k < 3; ++k) R.data()[k] = st.R[k];
-  for (int k = 0; k < 9; ++k) n_rows.data()[k] = st.n_rows[k];
+  for (int k = 0; k < ff::kNoiseClasses; ++k) R.data()[k] = st.R[k];
+  for (int k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) n_rows.data()[k] = st.n_rows[k];
   for (int c = 0; c < 4; ++c) {
     g.data()[c] = st.g[static_cast<std::size_t>(c)];
     start.data()[c] = static_cast<double>(st.start[static_cast<std::size_t>(c)]);

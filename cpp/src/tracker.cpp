@@ -17,7 +17,13 @@ constexpr int NS = kTrackerStates;
 constexpr int OFFSET = kOffsetState;
 // CUSUM level below which its window (start sample and statistics) restarts (_kernels.RESTART).
 constexpr double kRestart = 1.0;
-// A row bias learnt from fewer than kYoungWarmups x warm_rows rows of its kind is young (_kernels.YOUNG_WARMUPS).
+// A row bias learnt from fewer than kYoungWarmups x warm_rows rows of its kinds is young (_kernels.YOUNG_WARMUPS).
+constexpr int kCarLike = 3;  // noise class of the car-like x_ch rows (_kernels.CAR_LIKE)
+
+// The bias state and noise class of row kind c (1..8), as _kernels._update: the car-like x_ch rows (7, 8) have
+// the straight ones' biases and a noise class of their own.
+int bias_of_kind(int c) noexcept { return c <= 6 ? 1 + c : c - 5; }
+int class_of_kind(int c) noexcept { return c <= 6 ? (c - 1) / 2 : kCarLike; }
 constexpr double kYoungWarmups = 10.0;
 // y_c's variance counts as informed below this fraction of its prior (_kernels.INFORMED).
 constexpr double kInformed = 1.0 - 1e-6;
@@ -94,12 +100,16 @@ void inverse_spd(const double (&A)[N][N], double (&out)[N][N]) noexcept {
 // the re-estimated states is the inverse of the normal matrix, decoupled from the rest.
 template <int N>
 void reset_payload(VectorN<N>& theta, MatrixN<N>& P, const MatrixN<N>& I, const VectorN<N>& b,
-                   const Eigen::Vector3d& reset_var, const Eigen::Matrix<double, 9, 1>& n_rows, double young,
+                   const Eigen::Vector3d& reset_var, const Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1>& n_rows,
+                   double young,
                    double bias_var) noexcept {
   bool sel[N];
   sel[0] = true;
   sel[1] = true;
-  for (int j = 2; j < NS; ++j) sel[j] = I(j, j) > 0.0 && n_rows[j - 2] < young;
+  for (int j = 2; j < NS; ++j) {
+    const double seen = n_rows[j - 2] + (j < 4 ? n_rows[j + 4] : 0.0);  // x_ch biases: straight and car-like rows
+    sel[j] = I(j, j) > 0.0 && seen < young;
+  }
   if constexpr (N > NS) sel[OFFSET] = true;
   double A[N][N] = {};
   double r[N] = {};
@@ -146,9 +156,10 @@ void reset_payload(VectorN<N>& theta, MatrixN<N>& P, const MatrixN<N>& I, const 
 }  // namespace
 
 const char* label(RowKind kind) noexcept {
-  static const char* names[7] = {"none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-"};
+  static const char* names[kRowKinds + 1] = {"none",      "x_ch+",     "x_ch-",          "y_ch+",         "y_ch-",
+                                             "gamma_ch+", "gamma_ch-", "x_ch+ car-like", "x_ch- car-like"};
   const int k = static_cast<int>(kind);
-  return (k >= 0 && k <= 6) ? names[k] : "?";
+  return (k >= 0 && k <= kRowKinds) ? names[k] : "?";
 }
 
 Status PayloadTracker::create(const Vector2& nominal, const Vector2& nominal_std, double dt,
@@ -213,7 +224,7 @@ void PayloadTracker::initial_state(TrackerStateOf<N>& st, const Vector2& nominal
     st.P(i, i) = sd * sd;
   }
   for (int j = 2; j < NS; ++j) st.P(j, j) = s.bias_std * s.bias_std;
-  st.R = Eigen::Vector3d::Constant(s.noise);
+  st.R = Eigen::Vector4d::Constant(s.noise);
   for (int w = 0; w < 4; ++w) {
     st.Iw[w].setZero();
     st.bw[w].setZero();
@@ -279,7 +290,7 @@ Status PayloadTracker::update(const TrackerRow& row, TrackerOutput& out) noexcep
   out.n_events = 0;
   const int c = static_cast<int>(row.kind);
   Status status = Status::ok;
-  if (c < 0 || c > 6) {
+  if (c < 0 || c > kRowKinds) {
     status = Status::unknown_row_kind;
   } else if (!finite(row.phi_m) || !finite(row.phi_C) || !finite(row.z) ||
              (settings_.com_offset && !finite(row.phi_y))) {
@@ -306,8 +317,8 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   const std::int64_t n = st.sample - 1;
   const int c = static_cast<int>(row.kind);
   const double phi_m = row.phi_m, phi_c = row.phi_C, z = row.z;
-  const int j = 1 + c;            // the bias state of this kind of row
-  const int cls = (c - 1) / 2;    // its coordinate: noise class
+  const int j = bias_of_kind(c);      // the bias state of this kind of row (car-like: the x_ch one)
+  const int cls = class_of_kind(c);   // its noise class
   double f[N] = {};
   f[0] = phi_m;
   f[1] = phi_c;
@@ -339,7 +350,8 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   for (int p = 0; p < N; ++p) fPf += f[p] * Pf[p];
   out.nis = r * r / (fPf + r_c);
   const bool warm = st.n_rows[c - 1] >= static_cast<double>(settings_.warm_rows);
-  const bool tested = warm && excited[cls == 2 ? 1 : 0];  // this row's own CUSUMs run on it
+  // the noise class learns from the rows of its own test (car-like rows: also the C_ch-excited ones)
+  const bool tested = warm && (excited[cls == 2 ? 1 : 0] || (cls == kCarLike && excited[1]));
   double gmax = 0.0;
   for (int i = 0; i < 2; ++i) {
     for (int s = 0; s < 2; ++s) {
@@ -372,10 +384,10 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   joseph<N>(st.P, K, f, r_eff);
   for (int p = 0; p < N; ++p) st.theta[p] += K[p] * r;
   if (tested && gmax < 0.5 * settings_.threshold) {  // the noise: from rows the detector tests, frozen while a change builds up
-    const double lam = std::max(1.0 / (st.n_rows[6 + cls] + 1.0), dt_ / settings_.noise_time);
+    const double lam = std::max(1.0 / (st.n_rows[kRowKinds + cls] + 1.0), dt_ / settings_.noise_time);
     st.R[cls] += lam * (r * r - st.R[cls]);
   }
-  st.n_rows[6 + cls] += 1.0;
+  st.n_rows[kRowKinds + cls] += 1.0;
   st.n_rows[c - 1] += 1.0;
   detect<N>(out);
 }

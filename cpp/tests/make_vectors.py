@@ -320,6 +320,7 @@ def tracker_offset_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarr
     kind, phi, z = _synthetic_rows(np.random.default_rng(SEED))
     i = np.arange(kind.size)
     turning = np.isin(kind, (1, 2)) & ((i // 150) % 2 == 1)  # the car-like part: every other 150 rows
+    kind = np.where(turning, kind + 6, kind)  # its kinds: x_ch+- car-like
     phi_y = np.where(turning, 0.3 * np.cos(2 * np.pi * i / 300.0), 0.0)
     s_y = np.where(i >= 3200, 40.0, 0.0)  # with the drop (the second x_ch+ run)
     more_C = np.where(i >= 4600, 40.0, 0.0)  # C_ch's step doubled: an alarm of C_ch's CUSUM here too
@@ -330,21 +331,22 @@ def tracker_offset_inputs() -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarr
 def _synthetic_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Log 1: rows of the tracker's own model z = phi_m m + phi_C C + b_kind + AR(1) noise, in runs of
     every kind, with a drop of 300 kg at the second x_ch+ run and +40 kg m^2 of C_ch in the middle of
-    the second gamma_ch+ run (negative signs, C_ch detection, every bias and noise class)."""
-    runs = [(1, 400), (5, 2500), (2, 300), (3, 200), (6, 300), (1, 500), (5, 800), (4, 300)]
+    the second gamma_ch+ run (negative signs, C_ch detection, every bias and noise class: the car-like
+    x_ch rows at the end, four times noisier)."""
+    runs = [(1, 400), (5, 2500), (2, 300), (3, 200), (6, 300), (1, 500), (5, 800), (4, 300), (7, 400), (8, 300)]
     kind = np.concatenate([np.full(n, k) for k, n in runs]).astype(np.int64)
     n = kind.size
     i = np.arange(n)
     wave = np.sin(2 * np.pi * i / 400.0 + rng.uniform(0, 2 * np.pi))
-    coord = (kind + 1) // 2
+    coord = np.array([0, 1, 1, 2, 2, 3, 3, 1, 1])[kind]  # agvdyn.online.rows.COORDINATE_OF_KIND
     phi = np.zeros((n, 2))
     phi[:, 0] = np.where(coord == 1, 0.4 * wave, np.where(coord == 2, 0.3 * wave, 0.0))
     phi[:, 1] = np.where(coord == 3, 1.0 * wave, np.where(coord == 1, 0.05 * np.cos(2 * np.pi * i / 400.0), 0.0))
     starts = np.cumsum([0] + [r[1] for r in runs])
     m = np.where(i >= starts[5], 842.0684, 1142.0684)
     C = np.where(i >= starts[6] + 400, 326.6, 286.6)  # mid-run: after the drop's reset, C_ch is relearnt first
-    bias = np.array([0.0, 3.0, -2.0, 1.5, -1.0, 0.8, -0.5])[kind]
-    e = rng.normal(0.0, 0.6, n)
+    bias = np.array([0.0, 3.0, -2.0, 1.5, -1.0, 0.8, -0.5, 3.0, -2.0])[kind]  # car-like: the x_ch biases
+    e = rng.normal(0.0, 0.6, n) * np.where(kind >= 7, 4.0, 1.0)  # car-like rows: a noise class of their own
     noise = np.zeros(n)
     for k in range(1, n):
         noise[k] = 0.98 * noise[k - 1] + e[k]

@@ -169,9 +169,9 @@ ff::PayloadTracker make(const TrackerVectors& v) {
 TEST(TrackerVectors, SequenceHasBothLogsStepsAndEveryKind) {
   const TrackerVectors& v = vectors();
   ASSERT_GE(v.samples.size(), 5000u);
-  int kinds[7] = {0, 0, 0, 0, 0, 0, 0};
+  int kinds[ff::kRowKinds + 1] = {};
   for (const Sample& s : v.samples) ++kinds[static_cast<int>(s.row.kind)];
-  for (int k = 0; k < 7; ++k) EXPECT_GT(kinds[k], 100) << ff::label(static_cast<ff::RowKind>(k));
+  for (int k = 0; k <= ff::kRowKinds; ++k) EXPECT_GT(kinds[k], 100) << ff::label(static_cast<ff::RowKind>(k));
   EXPECT_GE(v.root.find("events")->values.size(), 3u);
 }
 
@@ -190,8 +190,12 @@ double check_final(const ff::TrackerStateOf<N>& st, const Node& f, double relati
   for (std::size_t k = 0; k < N * N; ++k) {
     worst = std::max(worst, deviation(st.P(k / N, k % N), P[k], relative, "final P", k));
   }
-  for (std::size_t k = 0; k < 3; ++k) worst = std::max(worst, deviation(st.R[k], R[k], relative, "final R", k));
-  for (std::size_t k = 0; k < 9; ++k) EXPECT_EQ(st.n_rows[k], n_rows.at(k));
+  EXPECT_EQ(R.size(), static_cast<std::size_t>(ff::kNoiseClasses));
+  EXPECT_EQ(n_rows.size(), static_cast<std::size_t>(ff::kRowKinds + ff::kNoiseClasses));
+  for (std::size_t k = 0; k < ff::kNoiseClasses; ++k) {
+    worst = std::max(worst, deviation(st.R[k], R.at(k), relative, "final R", k));
+  }
+  for (std::size_t k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) EXPECT_EQ(st.n_rows[k], n_rows.at(k));
   for (std::size_t k = 0; k < 4; ++k) {
     worst = std::max(worst, deviation(st.g[k], g.at(k), relative, "final g", k));
     EXPECT_EQ(st.start[k], static_cast<std::int64_t>(start.at(k)));
@@ -337,14 +341,15 @@ TEST(Tracker, RefusesBadRowsAndSettings) {
   ff::PayloadTracker tracker = make(v);
   ff::TrackerOutput out;
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(tracker.update(ff::TrackerRow{static_cast<ff::RowKind>(7), 0.1, 0.0, 1.0}, out), ff::Status::unknown_row_kind);
+  EXPECT_EQ(tracker.update(ff::TrackerRow{static_cast<ff::RowKind>(9), 0.1, 0.0, 1.0}, out), ff::Status::unknown_row_kind);
+  EXPECT_EQ(tracker.update(ff::TrackerRow{static_cast<ff::RowKind>(-1), 0.1, 0.0, 1.0}, out), ff::Status::unknown_row_kind);
   EXPECT_STREQ(ff::to_string(ff::Status::unknown_row_kind), "unknown_row_kind");
   EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::x_plus, nan, 0.0, 1.0}, out), ff::Status::non_finite_input);
   EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::gamma_minus, 0.0, 0.2, INFINITY}, out), ff::Status::non_finite_input);
   EXPECT_TRUE(std::isnan(out.nis));
   EXPECT_EQ(out.estimate, v.nominal);  // refused rows leave the state
   EXPECT_EQ(tracker.state().n_rows.sum(), 0.0);
-  EXPECT_EQ(tracker.state().sample, 3);  // but count as samples
+  EXPECT_EQ(tracker.state().sample, 4);  // but count as samples
   EXPECT_EQ(tracker.update(ff::TrackerRow{ff::RowKind::none, nan, nan, nan}, out), ff::Status::ok);
   ff::PayloadTracker bad;
   ff::TrackerSettings s = v.settings;
@@ -366,7 +371,7 @@ TEST(Tracker, InitialStateAndStateRoundTrip) {
   EXPECT_EQ(st.theta.head<2>(), v.nominal);
   EXPECT_DOUBLE_EQ(a.std()[0], std::max(v.nominal_std[0], v.settings.initial_std * v.nominal[0]));
   EXPECT_DOUBLE_EQ(std::sqrt(st.P(5, 5)), v.settings.bias_std);
-  EXPECT_EQ(st.R, Eigen::Vector3d::Constant(v.settings.noise));
+  EXPECT_EQ(st.R, Eigen::Vector4d::Constant(v.settings.noise));
   // a tracker given another's state continues identically
   ff::TrackerOutput out_a, out_b;
   const std::size_t half = 1500;
@@ -380,6 +385,8 @@ TEST(Tracker, InitialStateAndStateRoundTrip) {
   EXPECT_EQ(out_a.estimate, out_b.estimate);
   EXPECT_EQ(a.state().P, b.state().P);
   EXPECT_STREQ(ff::label(ff::RowKind::gamma_minus), "gamma_ch-");
+  EXPECT_STREQ(ff::label(ff::RowKind::x_car_minus), "x_ch- car-like");
+  EXPECT_STREQ(ff::label(static_cast<ff::RowKind>(9)), "?");
 }
 
 // A pick-up changes m_ch and C_ch together: an m_ch alarm from straight rows (no C_ch information in

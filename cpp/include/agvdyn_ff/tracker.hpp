@@ -12,7 +12,8 @@
 // Per row: a Kalman filter with a random walk over (m_ch, C_ch, six row biases), information
 // gating (a parameter learns, and its covariance grows, only from rows that excite it), a
 // directional (Schmidt-type) update in Joseph form, the residual noise estimated online from the rows
-// the detector tests, residual correlation in the row weight; four CUSUMs (m_ch from translation
+// the detector tests (per noise class: straight x_ch, y_ch, gamma_ch and car-like x_ch rows), residual
+// correlation in the row weight; four CUSUMs (m_ch from translation
 // rows, C_ch from rotation rows, both signs) whose alarm is a payload change: m_ch, C_ch and the row
 // biases learnt from few rows are re-estimated together from the rows since the CUSUM's start, with
 // fresh priors (PX4-style covariance reset). With com_offset a ninth state, m_ch y_c, is learnt from
@@ -43,6 +44,9 @@ constexpr int kOffsetStates = kTrackerStates + 1;
 constexpr int kOffsetState = kTrackerStates;
 using TrackerVector = Eigen::Matrix<double, kTrackerStates, 1>;
 using TrackerMatrix = Eigen::Matrix<double, kTrackerStates, kTrackerStates>;
+/// Kinds of row (RowKind: 1..8) and noise classes (x_ch straight, y_ch, gamma_ch, x_ch car-like).
+constexpr int kRowKinds = 8;
+constexpr int kNoiseClasses = 4;
 
 /// The whole state of a tracker of N states (agvdyn.online.tracker.TrackerState): CUSUM index c = 2 i + s
 /// for parameter i (0: m_ch, 1: C_ch) and sign s (0: +, 1: -). Each size has its own storage (the
@@ -53,8 +57,9 @@ struct TrackerStateOf {
   using Matrix = Eigen::Matrix<double, N, N>;
   Vector theta = Vector::Zero();                 ///< m_ch, C_ch, biases of x_ch+, x_ch-, y_ch+, y_ch-, gamma_ch+, gamma_ch-[, m_ch y_c]
   Matrix P = Matrix::Zero();                     ///< covariance of theta
-  Eigen::Vector3d R = Eigen::Vector3d::Zero();   ///< residual variance of x_ch, y_ch, gamma_ch rows
-  Eigen::Matrix<double, 9, 1> n_rows = Eigen::Matrix<double, 9, 1>::Zero();  ///< rows per kind (6), per coordinate (3)
+  Eigen::Vector4d R = Eigen::Vector4d::Zero();   ///< residual variance per noise class: x_ch straight, y_ch, gamma_ch, x_ch car-like
+  Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1> n_rows =
+      Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1>::Zero();  ///< rows per kind (8), per noise class (4)
   std::array<double, 4> g{};                     ///< CUSUMs
   std::array<std::int64_t, 4> start{};           ///< their window's first sample
   std::array<Matrix, 4> Iw{};                    ///< window information f f^T / R_eff
@@ -63,10 +68,16 @@ struct TrackerStateOf {
 };
 
 /// Kind of a row (agvdyn.online.rows.ROW_KINDS): the chassis coordinate of the row's motion mode and
-/// the sign of its velocity; none: no row at this sample.
-enum class RowKind : int { none = 0, x_plus = 1, x_minus = 2, y_plus = 3, y_minus = 4, gamma_plus = 5, gamma_minus = 6 };
+/// the sign of its velocity; none: no row at this sample. x_car_plus, x_car_minus: the x_ch rows of
+/// car-like motion (x_plus, x_minus: of straight motion): the biases of x_plus and x_minus, a noise level of
+/// their own (their yaw column misfits where the tyres scrub in turns).
+enum class RowKind : int {
+  none = 0, x_plus = 1, x_minus = 2, y_plus = 3, y_minus = 4, gamma_plus = 5, gamma_minus = 6, x_car_plus = 7,
+  x_car_minus = 8
+};
 
-/// Label as in ROW_KINDS: "none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-"; "?" otherwise.
+/// Label as in ROW_KINDS: "none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-", "x_ch+ car-like",
+/// "x_ch- car-like"; "?" otherwise.
 const char* label(RowKind kind) noexcept;
 
 /// Constants of the tracker, defaults and meaning as agvdyn.online.TrackerSettings (relative ones
@@ -143,7 +154,7 @@ class PayloadTracker {
 
   /// One sample: the row's update when it has one (kind != none), detection and reset; out gets
   /// the estimates after it. The per-sample call: no heap allocation, no exceptions.
-  /// Status::unknown_row_kind (kind not in 0..6) or non_finite_input (NaN or infinity in phi_m,
+  /// Status::unknown_row_kind (kind not in 0..8) or non_finite_input (NaN or infinity in phi_m,
   /// phi_C, z, and phi_y with com_offset): the row is refused and the sample counts as one without a row (out has the current
   /// estimates, nis NaN, no event).
   Status update(const TrackerRow& row, TrackerOutput& out) noexcept;

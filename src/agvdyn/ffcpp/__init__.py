@@ -186,5 +186,5 @@ def track_rows(kind, phi, z, state, settings, nominal, dt: float):
     tracker.store_state(*arrays)
     if row >= 0:
         raise ValueError(f"C++ tracker, row {row}: kind {int(kind[row])}, phi {phi[row].tolist()}, z {float(z[row])}: "
-                         f"{core.status_name(status)}: expected a kind 0..6 and finite phi, z")
+                         f"{core.status_name(status)}: expected a kind 0..8 and finite phi, z")
     return theta, var, nis, flag, events, offset

@@ -22,11 +22,16 @@ import numpy as np
 
 from agvdyn.model_spec import CENTRE_NAMES, ModelParameters
 from agvdyn.online import _kernels as kern
-from agvdyn.online.rows import ROW_KINDS, TRACKED, OnlineRows, causal_rows
+from agvdyn.online.rows import BIAS_KINDS, TRACKED, OnlineRows, causal_rows
 from agvdyn.online.tracker import ChangeEvent, TrackerRun, TrackerSettings, TrackerState, run_tracker
 from agvdyn.platform import Geometry, Parameters
 
-__all__ = ["track", "TrackResult", "TrackerSettings", "ChangeEvent", "OnlineRows", "causal_rows", "TRACKED"]
+__all__ = ["track", "TrackResult", "TrackerSettings", "ChangeEvent", "OnlineRows", "causal_rows", "TRACKED",
+           "NOISE_CLASSES"]
+
+#: The tracker's noise classes (``TrackResult.noise_std``): x_ch rows of straight motion, y_ch, gamma_ch,
+#: x_ch rows of car-like motion (their yaw column misfits where the tyres scrub in turns).
+NOISE_CLASSES = ("x_ch", "y_ch", "gamma_ch", "x_ch car-like")
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,8 +41,8 @@ class TrackResult:
     also x_c, y_c: x_c NaN with an infinite std, not identifiable; y_c's std by the delta method, inf until
     a car-like row informs it), ``nis`` (N,) (NaN without a row), ``event`` (N,) flags (1: m_ch, 2: C_ch);
     ``events`` the detected changes; ``settings``; ``bias`` (6,) the final row biases of the kinds of
-    :data:`~agvdyn.online.rows.ROW_KINDS` and ``noise_std`` (3,) the residual stds of the x_ch, y_ch,
-    gamma_ch rows."""
+    :data:`~agvdyn.online.rows.BIAS_KINDS` and ``noise_std`` (4,) the residual stds of the noise classes
+    :data:`NOISE_CLASSES` (x_ch rows of straight motion, y_ch, gamma_ch, x_ch rows of car-like motion)."""
 
     t: np.ndarray
     source: np.ndarray
@@ -97,8 +102,8 @@ class TrackResult:
             final[name] = {"value": value if math.isfinite(value) else None,
                            "std": std if math.isfinite(std) else None, "identified": math.isfinite(std)}
         return {"final": final, "events": [e.to_dict() for e in self.events],
-                "row_bias": dict(zip(ROW_KINDS[1:], self.bias.tolist())),
-                "row_noise_std": dict(zip(("x_ch", "y_ch", "gamma_ch"), self.noise_std.tolist())),
+                "row_bias": dict(zip(BIAS_KINDS, self.bias.tolist())),
+                "row_noise_std": dict(zip(NOISE_CLASSES, self.noise_std.tolist())),
                 "group_delay": self.group_delay, "latency": self.latency, "sources": list(self.sources),
                 "settings": {k: v for k, v in self.settings.__dict__.items() if k != "rules"}}
 

@@ -2,7 +2,7 @@
 
 The algorithm, its state and constants are documented in :mod:`agvdyn.online.tracker` (the
 reference of the C++ twin); this file only runs it. Sizes: 8 states (``NS``; 9 with the centre-of-mass
-offset, ``NS + 1``: the size of ``theta`` says which), 6 row kinds (3 noise classes), 4 CUSUMs.
+offset, ``NS + 1``: the size of ``theta`` says which), 8 row kinds (6 biases, 4 noise classes), 4 CUSUMs.
 """
 from __future__ import annotations
 
@@ -30,6 +30,11 @@ OFFSET = NS
 OFFSET_STATES = NS + 1
 #: y_c's variance counts as informed (a finite std is reported) once below this fraction of its prior.
 INFORMED = 1.0 - 1e-6
+#: Row kinds (codes 1..KINDS of agvdyn.online.rows.ROW_KINDS; 7, 8: the car-like x_ch rows) and noise classes
+#: (x_ch straight, y_ch, gamma_ch, x_ch car-like): ``n_rows`` holds the rows per kind, then per class.
+KINDS = 8
+CLASSES = 4
+CAR_LIKE = 3  # the noise class of the car-like rows (kinds 7, 8: the biases of x_ch+, x_ch-)
 
 
 @_jit
@@ -61,7 +66,7 @@ def _joseph(P, K, f, r_eff, tmp, ns):
 @_jit
 def _reset_payload(theta, P, I, b, reset_var, n_rows, young, bias_var, ns):
     """A payload change: m_ch, C_ch (and m_ch y_c when tracked) and the young row biases the window saw
-    (kind rows < ``young``) re-estimated together from a CUSUM's window (statistics I, b): priors at
+    (rows of its kinds < ``young``) re-estimated together from a CUSUM's window (statistics I, b): priors at
     their values with variances ``reset_var`` (m_ch, C_ch, m_ch y_c) and ``bias_var``; the other biases
     held; the covariance of the re-estimated states is the inverse of the normal matrix, decoupled
     from the rest."""
@@ -69,7 +74,8 @@ def _reset_payload(theta, P, I, b, reset_var, n_rows, young, bias_var, ns):
     sel[0] = True
     sel[1] = True
     for j in range(2, NS):
-        sel[j] = I[j, j] > 0.0 and n_rows[j - 2] < young
+        seen = n_rows[j - 2] + (n_rows[j + 4] if j < 4 else 0.0)  # x_ch biases: straight and car-like rows
+        sel[j] = I[j, j] > 0.0 and seen < young
     if ns > NS:
         sel[OFFSET] = True
     A = np.zeros((ns, ns))
@@ -147,8 +153,8 @@ def offset_estimate(theta, P, reset_var_y):
 def track_rows(phi, z, kind, k, theta, P, R, n_rows, g, Iw, bw, start, out_theta, out_var, out_nis, out_event,
                out_offset, events, n_events):
     """Run the tracker over rows ``phi`` (N, 2; (N, 3) with the m_ch y_c column), ``z`` (N,), ``kind``
-    (N,) with constants ``k``; the state (``theta`` (ns,), ``P`` (ns, ns), ``R`` (3,), ``n_rows`` (9,:
-    per kind, then per coordinate), ``g`` (2, 2), ``Iw`` (2, 2, ns, ns), ``bw`` (2, 2, ns), ``start``
+    (N,) with constants ``k``; the state (``theta`` (ns,), ``P`` (ns, ns), ``R`` (4,: per noise class),
+    ``n_rows`` (12,: per kind, then per noise class), ``g`` (2, 2), ``Iw`` (2, 2, ns, ns), ``bw`` (2, 2, ns), ``start``
     (2, 2); ns = 8, or 9 with the centre-of-mass offset) is updated in place and carries over to the
     next log.
     Writes per sample the estimates, variances, NIS (NaN without a row), event flags (bit 0: m_ch,
@@ -211,8 +217,8 @@ def _predict(P, f, phi_m, phi_c, phi_y, noise, k, delta, q, reset_var, ns):
 def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n_rows, g, Iw, bw, start, f, K, Pf,
             tmp, out_nis, out_event, events, n_events, ns):
     """One row: prediction, innovation, CUSUMs, gated update, noise estimate, detection and reset."""
-    j = 1 + c  # the bias state of this kind of row
-    cls = (c - 1) // 2  # its coordinate: noise class
+    j = 1 + c if c <= 6 else c - 5  # the bias state of this kind of row (car-like x_ch rows: the straight ones')
+    cls = (c - 1) // 2 if c <= 6 else CAR_LIKE  # its noise class: x_ch straight, y_ch, gamma_ch, x_ch car-like
     for p in range(ns):
         f[p] = 0.0
     f[0], f[1], f[j] = phi_m, phi_c, 1.0
@@ -232,7 +238,9 @@ def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n
         fPf += f[p] * Pf[p]
     out_nis[n] = r * r / (fPf + r_c)
     warm = n_rows[c - 1] >= k[K_WARM]  # rows of this kind (its bias has settled)
-    tested = warm and excited[1 if cls == 2 else 0]  # this row's own CUSUMs run on it
+    # the noise class learns from the rows of its own test (car-like rows: also the C_ch-excited ones, whose
+    # yaw misfit, e.g. tyre scrub, would otherwise pull C_ch with the straight rows' weight)
+    tested = warm and (excited[1 if cls == 2 else 0] or (cls == CAR_LIKE and excited[1]))
     gmax = 0.0
     for i in range(2):
         for s in range(2):
@@ -260,9 +268,9 @@ def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n
     for p in range(ns):
         theta[p] += K[p] * r
     if tested and gmax < 0.5 * k[K_H]:  # the noise level: from rows the detector tests, none while a change builds up
-        lam = max(1.0 / (n_rows[6 + cls] + 1.0), k[K_DT] / k[K_TAU_R])
+        lam = max(1.0 / (n_rows[KINDS + cls] + 1.0), k[K_DT] / k[K_TAU_R])
         R[cls] += lam * (r * r - R[cls])
-    n_rows[6 + cls] += 1.0
+    n_rows[KINDS + cls] += 1.0
     n_rows[c - 1] += 1.0
     return _detect(n, k, theta, P, n_rows, g, Iw, bw, start, reset_var, out_event, events, n_events, ns)
 

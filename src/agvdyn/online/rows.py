@@ -18,7 +18,10 @@ vectorised passes over a log; each value depends only on samples up to ``k + loo
    nothing of m_ch and C_ch (their chassis entries of H_k are zero) and are not used. A row is kept
    when its coordinate moves (``|s_dot| >= stiction_threshold``), no wheel slips (slip speed below
    ``slip_threshold``), with the identification's guards around dropped rows on both sides
-   (``stiction_guard`` / cut-off s; ``slip_guard`` s): the guard is the rest of the look-ahead.
+   (``stiction_guard`` / cut-off s; ``slip_guard`` s): the guard is the rest of the look-ahead. The
+   x_ch rows of car-like motion are kinds of their own (7, 8; the tracker gives them the straight rows'
+   biases but a noise level of their own: their yaw column misfits wherever the tyres scrub or slip
+   laterally in turns, which the no-slip kinematics of eq. (9) do not describe).
 
 Row k: ``z_k = phi_k . (m_ch, C_ch)`` with ``phi_k`` the m_ch and C_ch columns of ``H_k^T Theta`` and
 ``z_k = H_k^T B u - (H_k^T Theta)_others p_others`` (every other parameter at its identified value).
@@ -49,13 +52,19 @@ from agvdyn.odometry import odometry_with_slip
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 from agvdyn.row_rules import RowSettings, guarded_mask
 
-__all__ = ["OnlineRows", "causal_rows", "causal_lowpass", "group_delay", "ROW_KINDS", "TRACKED"]
+__all__ = ["OnlineRows", "causal_rows", "causal_lowpass", "group_delay", "ROW_KINDS", "BIAS_KINDS",
+           "COORDINATE_OF_KIND", "TRACKED"]
 
 #: Tracked parameters (the columns of phi), in this order.
 TRACKED = ("m_ch", "C_ch")
 #: Kinds of row (index = kind code; 0: no row): the chassis coordinate and the sign of its velocity
-#: (each has its own bias in the tracker: torque offsets and Coulomb friction the held values miss).
-ROW_KINDS = ("none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-")
+#: (each of the first six has its own bias in the tracker: torque offsets and Coulomb friction the held
+#: values miss); 7, 8: the x_ch rows of car-like motion (straight: 1, 2), with the biases of x_ch+ and x_ch-.
+ROW_KINDS = ("none", "x_ch+", "x_ch-", "y_ch+", "y_ch-", "gamma_ch+", "gamma_ch-", "x_ch+ car-like", "x_ch- car-like")
+#: The kinds with a bias of their own (the tracker's states after m_ch and C_ch).
+BIAS_KINDS = ROW_KINDS[1:7]
+#: Coordinate of each kind (1: x_ch, 2: y_ch, 3: gamma_ch; 0: no row).
+COORDINATE_OF_KIND = np.array([0, 1, 1, 2, 2, 3, 3, 1, 1])
 _KIND_OF_MODE = {Mode.STRAIGHT: 1, Mode.CAR_LIKE: 1, Mode.LATERAL: 2, Mode.ROTATION: 3}
 _DIFFERENCE_LOOKAHEAD = 2
 
@@ -120,6 +129,7 @@ def _row_kinds(geom: Geometry, alpha: np.ndarray, q_dot: np.ndarray, slip: np.nd
         keep |= _guard(moving & (kind == k), guard)
     kind[~(keep & no_slip)] = 0
     signed = np.where(kind > 0, 2 * kind - 1 + (velocity < 0), 0).astype(np.int8)
+    signed[(mode == int(Mode.CAR_LIKE)) & (kind == 1)] += 6  # the car-like x_ch rows: kinds 7, 8
     return signed, max(guard, slip_guard), mode
 
 
@@ -135,7 +145,7 @@ def _project(geom: Geometry, kind: np.ndarray, alpha: np.ndarray, signals: np.nd
     others = np.ones(p.size, dtype=bool)
     others[cols] = False
     for k, mode, c in ((1, Mode.CAR_LIKE, 1), (2, Mode.LATERAL, 0), (3, Mode.ROTATION, 0)):
-        idx = np.flatnonzero((kind + 1) // 2 == k)
+        idx = np.flatnonzero(COORDINATE_OF_KIND[kind] == k)
         if idx.size == 0:
             continue
         if mode is Mode.CAR_LIKE:  # straight is car-like motion at alpha_v = 0 (H_2 then equals H_straight)
