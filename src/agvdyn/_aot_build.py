@@ -42,6 +42,7 @@ WORKLOAD = (
     ("identify", "{d}/lane.parquet", "--out", "{d}/p_lane.yaml"),
     ("inspect", "{d}/ident.parquet", "{d}/lane.parquet", "{d}/slip.parquet"),
     ("validate", "{d}/lane.parquet", "--params", "{d}/p.yaml"),
+    ("track", "{d}/ident.parquet", "--params", "{d}/p.yaml", "--out", "{d}/t.parquet"),
     ("report", "--ident", "{d}/ident.parquet", "--validation", "{d}/lane.parquet", "--out", "{d}/r.html",
      "--params-out", "{d}/r.yaml"),
 )

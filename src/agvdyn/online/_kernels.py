@@ -9,7 +9,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from agvdyn._jit import njit
 
 _jit = njit(cache=True, error_model="numpy")
 
