@@ -1,13 +1,14 @@
 """Start-up of the commands as a user runs them (issue 28): each command, in a fresh interpreter, imports
 only the heavy libraries its work needs. An import hook records, for the first import of each scipy
 subpackage, pandas and matplotlib, whether agvdyn code asked for it (numba's own imports, e.g. of
-scipy.linalg.cython_blas when it loads kernels, are numba's start-up, not ours, and are left out).
+scipy.linalg.cython_blas when it loads kernels, are numba's start-up, not ours, and are left out: the
+commands load no numba when the ahead-of-time kernels are built, but a JIT fallback still may).
 
-The default ``identify`` still needs scipy.linalg (the estimator's triangular solves: numpy's solve
-differs by an ulp, which the residuals' cancellation lifts to ~1e-10 in the stds), scipy.fft (the
-single-precision FFT of the correlation time: numpy's computes it in double) and scipy.special
-(Student's t quantile of the intervals); ``inspect`` needs scipy.linalg for its trial fit; ``validate``
-needs none of them, nor ``simulate`` (which still writes its log through pandas: marked xfail)."""
+The default ``identify`` and ``inspect`` need none of them: numpy's LU solve for the triangular
+factors (an ulp from scipy's solve_triangular), numpy's FFT in double precision for the correlation
+time, and our own Student's t quantile for the intervals (tests/test_scipy_free_numerics.py);
+``validate`` needs none, nor ``simulate`` (its log is written from numpy columns, tests/test_log_columns.py).
+Only ``import scipy`` itself (its version, the key of the filter cache) is left."""
 from __future__ import annotations
 
 import json
@@ -44,8 +45,6 @@ except SystemExit as exc:
 print("IMPORTS " + json.dumps({"code": code, "found": {k: v for k, v in found.items() if v != "?"}}))
 """
 
-#: what the default identify still needs (see the module docstring); everything else is a regression
-IDENTIFY_NEEDS = {"scipy.linalg", "scipy.fft", "scipy.special"}
 
 
 def _heavy_imports(args: list[str], cwd: Path) -> dict[str, str]:
@@ -66,24 +65,21 @@ def simulated(tmp_path_factory) -> tuple[Path, dict[str, str]]:
     return folder, found
 
 
-@pytest.mark.xfail(strict=True, reason="the log is still written through a DataFrame (write_log: the checks, "
-                   "pa.Table.from_pandas and its metadata; the sidecar's tracking table): pandas at write time")
 def test_simulate_imports_neither_pandas_nor_scipy(simulated):
     _, found = simulated
     assert found == {}, f"simulate identification imported {found}"
 
 
-def test_identify_imports_only_what_the_default_fit_needs(simulated):
+def test_identify_imports_neither_pandas_nor_scipy(simulated):
     folder, _ = simulated
     found = _heavy_imports(["identify", "log.parquet", "--out", "p.yaml"], folder)
-    assert set(found) <= IDENTIFY_NEEDS, f"identify imported {found}"
-    assert "pandas" not in found and "matplotlib" not in found
+    assert found == {}, f"identify imported {found}"
 
 
-def test_inspect_imports_only_the_trial_fits_linear_algebra(simulated):
+def test_inspect_imports_neither_pandas_nor_scipy(simulated):
     folder, _ = simulated
     found = _heavy_imports(["inspect", "log.parquet"], folder)
-    assert set(found) <= {"scipy.linalg"}, f"inspect imported {found}"  # the relative stds' trial fit (OLS)
+    assert found == {}, f"inspect imported {found}"  # its trial fit (the relative stds) included
 
 
 def test_validate_imports_neither_pandas_nor_scipy(simulated):

@@ -57,7 +57,7 @@ def _tracking_table(result) -> Table:
              "heading_error": 1e3, "odometry_drift": 1e3, "saturated": 100}
     for key, title in cols.items():
         table.add_column(title, justify="left" if key == "segment" else "right")
-    for _, row in result.tracking().iterrows():
+    for row in result.tracking_rows():  # dicts: no pandas
         table.add_row(row["segment"], *(f"{row[k] * scale[k]:.1f}" for k in cols if k != "segment"))
     return table
 

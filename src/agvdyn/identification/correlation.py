@@ -11,7 +11,7 @@ import numpy as np
 
 from agvdyn.identification._threads import ordered_map
 
-__all__ = ["correlation_time", "autocovariance_sums", "masked_autocorrelation"]
+__all__ = ["correlation_time", "autocovariance_sums", "masked_autocorrelation", "next_fast_length"]
 
 
 def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *, window: float = 5.0,
@@ -34,9 +34,8 @@ def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *,
             pooled += min(x.shape[0] if n is None else n, max_steps)
             yield x
 
-    fft_threads = -1 if workers <= 1 else 1
     acf = None
-    for c in ordered_map(lambda x: _autocovariance((x() if callable(x) else x)[:max_steps], fft_threads), taken(),
+    for c in ordered_map(lambda x: autocovariance_sums((x() if callable(x) else x)[:max_steps]), taken(),
                          workers, "agvdyn-acf"):
         acf = c if acf is None else _pad_add(acf, c)
     p = acf.shape[1]
@@ -50,31 +49,35 @@ def correlation_time(series: Iterable[np.ndarray | Callable[[], np.ndarray]], *,
     return tau
 
 
-def _autocovariance(x: np.ndarray, fft_threads: int) -> np.ndarray:
-    """Unnormalised autocovariance sums (n, p) of the columns of x (n, p), by FFT in single
-    precision (~7 digits of rho are plenty for a window sum); in double precision where the sums
-    would overflow single's range (scores of a near-exact fit weighted by tiny residual variances)."""
-    n = x.shape[0]
-    peak = float(np.abs(x).max()) if x.size else 0.0
-    single = peak * peak * max(n, 1) < 1e30  # float32 overflows at 3.4e38; rounding in the FFT adds headroom
-    return autocovariance_sums(x, single=single, fft_threads=fft_threads)
-
-
-def autocovariance_sums(x: np.ndarray, *, single: bool = False, fft_threads: int = -1) -> np.ndarray:
+def autocovariance_sums(x: np.ndarray) -> np.ndarray:
     """Unnormalised autocovariance sums ``c[l, j] = sum_i x[i, j] x[i + l, j]``, lags ``0..n-1``,
-    of the columns of ``x`` (n, p), by FFT zero-padded to at least ``2n`` (no wrap-around); in
-    double precision unless ``single``. The one autocorrelation of the package: the correlation
-    time of the scores here, the residuals' autocorrelation of the report
-    (:func:`masked_autocorrelation`)."""
-    # here, not at the top: commands that read the package but take no autocorrelation skip scipy.fft's
-    # import (~0.2 s with scipy.special); numpy's FFT is not an equivalent: it computes single precision in double
-    import scipy.fft
-
+    of the columns of ``x`` (n, p), by FFT in double precision zero-padded to at least ``2n`` (no
+    wrap-around; the length :func:`next_fast_length`). The one autocorrelation of the package: the
+    correlation time of the scores here, the residuals' autocorrelation of the report
+    (:func:`masked_autocorrelation`). numpy's FFT (pocketfft, as scipy.fft's: the same values in double
+    precision) without scipy.fft's import (~0.2 s of the start-up of every fitting command)."""
     n = x.shape[0]
-    x = np.ascontiguousarray(x.T, dtype=np.float32 if single else np.float64)
-    size = scipy.fft.next_fast_len(2 * n, real=True)
-    f = scipy.fft.rfft(x, size, axis=1, workers=fft_threads)
-    return scipy.fft.irfft(f * np.conj(f), size, axis=1, workers=fft_threads)[:, :n].T.astype(float)
+    x = np.ascontiguousarray(x.T, dtype=np.float64)
+    size = next_fast_length(2 * n)
+    f = np.fft.rfft(x, size, axis=1)
+    return np.fft.irfft(f * np.conj(f), size, axis=1)[:, :n].T.copy()
+
+
+def next_fast_length(target: int) -> int:
+    """The smallest ``2^a 3^b 5^c >= target`` (``scipy.fft.next_fast_len(target, real=True)``): a
+    length whose real FFT factors into pocketfft's fast radices."""
+    if target <= 6:
+        return max(int(target), 1)
+    best = 1 << (int(target) - 1).bit_length()  # the power of two at or above
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            p2 = 1 << max(0, (-(-int(target) // p35) - 1).bit_length())  # smallest power of 2 with p35 * p2 >= target
+            best = min(best, p35 * p2)
+            p35 *= 3
+        p5 *= 5
+    return best
 
 
 def masked_autocorrelation(pieces: Iterable[tuple[np.ndarray, np.ndarray]], max_lag: int

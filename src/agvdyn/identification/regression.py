@@ -10,7 +10,7 @@ import numpy as np
 from agvdyn.dynamics import N_P
 from agvdyn.identifiability import base_parameters_of, triangular_factor
 from agvdyn.identification.equations import EquationBlock
-from agvdyn.identification.estimators import Estimator, LeastSquares, column_norms
+from agvdyn.identification.estimators import Estimator, LeastSquares, column_norms, solve_upper_triangular
 from agvdyn.identification.settings import EXCITATION, OFFSET_NAMES
 from agvdyn.identification.uncertainty import RowIndex
 
@@ -128,8 +128,6 @@ def variance_inflation(A: np.ndarray) -> np.ndarray:
 
     1 for a column orthogonal to the others, large when it is nearly a combination of them.
     """
-    import scipy.linalg  # here: the commands that read this module without fitting skip its import (~0.2 s)
-
     R = triangular_factor(A / column_norms(A))
-    R_inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]))
+    R_inv = solve_upper_triangular(R, np.eye(R.shape[0]))
     return np.einsum("ij,ij->i", R_inv, R_inv)

@@ -40,6 +40,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from agvdyn.determinacy import std_from_covariance
+from agvdyn.identification._student_t import normal_quantile, student_t_quantile
 from agvdyn.identification._uncertainty_kernels import block_changes, block_moments, step_scores
 from agvdyn.identification._threads import ordered_map
 from agvdyn.identification.correlation import correlation_time
@@ -70,12 +71,9 @@ class Uncertainty:
     def quantile(self, level: float = 0.95) -> np.ndarray:
         """Two-sided ``level`` quantile of each parameter's interval ``value +- q std``: Student's t
         with ``dof`` degrees of freedom (the variance is itself estimated from few blocks), else normal."""
-        from scipy import special  # the functions behind scipy.stats' norm.ppf and t.ppf (the same values),
-        # without scipy.stats' import (~0.5 s of every command's start-up)
-
-        if self.dof is None:
-            return np.full(self.cov.shape[0], special.ndtri(0.5 + level / 2))
-        return special.stdtrit(np.maximum(self.dof, 1.0), 0.5 + level / 2)
+        if self.dof is None:  # scipy.special's ndtri and stdtrit to ~1e-16 and 1e-12, without its import
+            return np.full(self.cov.shape[0], normal_quantile(0.5 + level / 2))
+        return student_t_quantile(np.maximum(self.dof, 1.0), 0.5 + level / 2)
 
 
 def _recording_jobs(est: Estimator, data: RegressionData) -> Iterator[Callable[[], tuple[RecordingRows, np.ndarray]]]:

@@ -7,6 +7,7 @@ holds facts about the run (platform, true parameters of a simulation, conversion
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -19,7 +20,9 @@ import yaml
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
 from agvdyn.time_base import stamp_interval
-from agvdyn.io.parquet import our_parquet_columns, parquet_metadata, write_our_parquet  # noqa: F401  (re-exported)
+from agvdyn.io.columns import checked_arrays
+from agvdyn.io.parquet import (  # noqa: F401  (re-exported)
+    our_parquet_columns, parquet_metadata, write_our_parquet, write_parquet_columns)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text
 from agvdyn.io.schema import (  # noqa: F401  (the schema's names, re-exported)
     LOG_COLUMNS,
@@ -329,7 +332,7 @@ def _plain(value: Any) -> Any:
 
 def write_log(
     path: str | os.PathLike,
-    frame: pd.DataFrame | Log,
+    frame: pd.DataFrame | Log | Mapping[str, Any],
     sidecar: dict[str, Any] | None = None,
     *,
     max_gap_samples: float = MAX_GAP_SAMPLES,
@@ -344,6 +347,9 @@ def write_log(
     ``sidecar`` is given it is written atomically to ``<path>.yaml``; when it is None a
     sidecar left over from an earlier file at ``path`` is removed so that it cannot be
     mistaken for this log's. A :class:`Log` is written with its own sidecar unless one is given.
+    ``frame`` may also be a mapping of numpy columns (:func:`agvdyn.io.columns.checked_arrays`: exactly
+    the log's columns, ``segment`` as labels): checked and written without pandas (a Parquet file
+    byte for byte the one of the same DataFrame).
 
     Returns the path written.
     """
@@ -353,16 +359,22 @@ def write_log(
         if sidecar is None and frame.sidecar:
             sidecar = frame.sidecar
         frame = frame.frame
-    checked, _ = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance, clip=False)
+    if isinstance(frame, Mapping):
+        checked, _ = checked_arrays(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
+                                    clip=False)
+    else:
+        checked, _ = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance, clip=False)
     side_text = None
     if sidecar is not None:
         if not isinstance(sidecar, dict):
             raise TypeError(f"sidecar: expected a dict, got {type(sidecar).__name__}")
         side_text = yaml.safe_dump(_plain(sidecar), sort_keys=False)
     if suffix == ".parquet":
-        write_atomically(path, lambda tmp: write_our_parquet(tmp, checked))
+        write = write_parquet_columns if isinstance(checked, LazyFrame) else write_our_parquet
+        write_atomically(path, lambda tmp: write(tmp, checked))
     else:
-        write_atomically(path, lambda tmp: checked.to_csv(tmp, index=False))
+        table = checked.frame() if isinstance(checked, LazyFrame) else checked
+        write_atomically(path, lambda tmp: table.to_csv(tmp, index=False))
     side = sidecar_path(path)
     if side_text is not None:
         write_text_atomically(side, side_text)

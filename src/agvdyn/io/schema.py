@@ -225,11 +225,12 @@ def checked_columns(
     *,
     max_gap_samples: float,
     stop_tolerance: float,
+    clip: bool = True,
 ) -> tuple[LazyFrame, dict[str, int]]:
     """The checks of :func:`check_frame` on columns read straight from a file in our schema:
     ``columns`` float64 arrays of every name in :data:`LOG_COLUMNS`, ``segment`` (category names
     or None for missing, int codes with -1 missing) or None. Returns the checked columns (made a
-    DataFrame only when one is asked for) and the clipped rows."""
+    DataFrame only when one is asked for) and the rows beyond a stop (clipped unless ``clip=False``)."""
     source = str(source)
     _check_options(max_gap_samples, stop_tolerance, MAX_SAMPLE_TIME)
     n = columns[LOG_COLUMNS[0]].shape[0]
@@ -239,7 +240,7 @@ def checked_columns(
     for k, col in enumerate(LOG_COLUMNS):
         block[:, k] = columns[col]
     clipped, nominal = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
-                                    max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=True)
+                                    max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=clip)
     codes = None if segment is None else _segment_codes(segment[0], segment[1], source, block[:, 0], False)
     block.setflags(write=False)
     return LazyFrame(block, codes, nominal), clipped

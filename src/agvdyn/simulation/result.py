@@ -117,14 +117,21 @@ class SimulationResult:
         twist = odometry(self.geometry, self.alpha_measured, a_dot, b_dot)
         return pose_from_velocities(twist, Ts)
 
-    def log_frame(self) -> pd.DataFrame:
-        """The log in the PLATFORM.md schema: t, alpha_*, beta_* (wheel side), m_* (measured motor torques), segment."""
+    def log_columns(self) -> dict[str, np.ndarray]:
+        """The log in the PLATFORM.md schema as numpy columns: t, alpha_*, beta_* (wheel side), m_*
+        (measured motor torques), segment (labels); what :meth:`write` writes (no pandas)."""
         data: dict[str, Any] = {"t": self.t, "alpha_l": self.alpha_measured[:, 0], "alpha_r": self.alpha_measured[:, 1]}
         for i, w in enumerate(WHEELS):
             data[f"beta_{w}"] = self.beta_measured[:, i]
         for i, w in enumerate(WHEELS):
             data[f"m_{w}"] = self.torque_measured[:, i]
-        data["segment"] = pd.Categorical(self.segment.astype(str))
+        data["segment"] = self.segment.astype(str)
+        return data
+
+    def log_frame(self) -> pd.DataFrame:
+        """:meth:`log_columns` as a DataFrame (the segment categorical)."""
+        data = self.log_columns()
+        data["segment"] = pd.Categorical(data["segment"])
         return pd.DataFrame(data)
 
     def truth_frame(self) -> pd.DataFrame:
@@ -143,6 +150,10 @@ class SimulationResult:
         return pd.DataFrame(data)
 
     def tracking(self) -> pd.DataFrame:
+        """:meth:`tracking_rows` as a table."""
+        return pd.DataFrame(self.tracking_rows())
+
+    def tracking_rows(self) -> list[dict[str, Any]]:
         """Tracking errors and odometry drift per segment (one row per segment, in time order).
 
         steering_max: max |alpha - alpha_d| (rad); wheel_speed_rms: RMS of beta_dot - beta_dot_d
@@ -172,7 +183,7 @@ class SimulationResult:
                 "odometry_heading_drift": float(abs(self.odometry_pose[end, 2] - pose[end, 2])),
                 "saturated": float(np.mean(saturated[sl])),
             })
-        return pd.DataFrame(rows)
+        return rows
 
     @property
     def whole_run_payload(self) -> Any:
@@ -246,7 +257,7 @@ class SimulationResult:
             "settings": self.settings.to_dict(),
             "plant": _plant_facts(self.geometry, self.plant_params, self.settings.plant),
             "floor_space": {"length": fs.length, "width": fs.width},
-            "tracking": self.tracking().to_dict(orient="records"),
+            "tracking": self.tracking_rows(),
             "slip_truth_threshold": SLIP_THRESHOLD,
             "slip_truth_merge_gap": MERGE_GAP,
             "slip_truth": [s.to_dict() for s in self.slip_intervals(SLIP_THRESHOLD)],
@@ -272,7 +283,7 @@ class SimulationResult:
             model_path = Path(str(path) + MJCF_SUFFIX)
             write_text_atomically(model_path, self.vehicle.xml)
             side["mujoco"]["mjcf"] = model_path.name
-        return write_log(path, self.log_frame(), side)
+        return write_log(path, self.log_columns(), side)
 
 
 def _plant_facts(geom: Geometry, params: Parameters, plant: PlantSettings) -> dict[str, Any]:
