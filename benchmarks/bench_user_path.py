@@ -330,10 +330,10 @@ def markdown(rows: list[dict], repeat: int, load: tuple[float, float], before: d
         lines += ["", "Per-sample cost against our own format (one log, fresh process; target within +15 %): "
                   + ", ".join(f"{n.split(':')[0].removeprefix('identify-').removesuffix('-1')} "
                               f"{n.split(': ')[1].split(' ')[0]}" for n in notes) + "."]
-    lines += ["", "Where a fresh one-log `identify` spends its time before its ~0.06 s of work: numba ~0.3 s "
-              "(importing it and building its typing registries for the cached kernels), scipy ~0.2 s, the "
-              "command line (typer, pydantic, rich) ~0.15 s, numpy and pyarrow ~0.1 s; see docs/identification.md, "
-              "\"Start-up: the user's path\"."]
+    lines += ["", "Where a fresh one-log `identify` spends its ~0.45 s: the work itself ~0.07 s; imports ~0.3 s (the "
+              "command line: typer, pydantic, rich ~0.12 s; numpy ~0.05 s; pyarrow ~0.05 s; agvdyn's io and "
+              "identification ~0.1 s); no numba (its kernels are compiled ahead of time by `make`), no scipy, no "
+              "pandas; see docs/identification.md, \"Start-up: the user's path\"."]
     return "\n".join(lines)
 
 

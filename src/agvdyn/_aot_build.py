@@ -72,19 +72,21 @@ def _code(t) -> str | None:
         return None
     if isinstance(t, types.Array):
         dtype = np.dtype(str(t.dtype))
-        return f"{dtype.kind}{dtype.itemsize}:{t.ndim}"
+        return f"{dtype.kind}{dtype.itemsize}:{t.ndim}{'C' if t.layout == 'C' else 'A'}"
     if isinstance(t, (types.Float, types.Integer, types.Boolean)):
         dtype = np.dtype(str(t)) if not isinstance(t, types.Boolean) else np.dtype(bool)
         return f"{dtype.kind}{dtype.itemsize}"
     return None
 
 
-def _general(t):
-    """An array type of any layout and writability (one compiled version serves every caller)."""
+def _general(t, layout: str | None = None):
+    """An array type of the layout of ``t`` (C-contiguous or any: ``layout="A"``), writable (an array
+    that is not is passed the same way)."""
     from numba.core import types
 
     if isinstance(t, types.Array):
-        return types.Array(t.dtype, t.ndim, "A", readonly=False, aligned=True)
+        return types.Array(t.dtype, t.ndim, layout or ("C" if t.layout == "C" else "A"), readonly=False,
+                           aligned=True)
     return t
 
 
@@ -102,10 +104,12 @@ def harvested_kernels() -> dict:
                 continue
             qual = f"{name}.{value.py_func.__qualname__}"
             entries = {}
-            for args in value.signatures:
-                codes = tuple(_code(t) for t in args)
-                if None not in codes:
-                    entries.setdefault(codes, tuple(_general(t) for t in args))
+            for args in value.signatures:  # as called (C-contiguous arrays: faster loops), and for any layout
+                for layout in (None, "A"):
+                    general = tuple(_general(t, layout) for t in args)
+                    codes = tuple(_code(t) for t in general)
+                    if None not in codes:
+                        entries.setdefault(codes, general)
             if entries:
                 found[qual] = (value, sorted(entries.items()))
     return found
@@ -158,7 +162,8 @@ def build(quiet: bool = False) -> Path:
         kernels = harvested_kernels()
         cc = CC(MODULE)
         cc.output_dir = folder
-        cc.target_cpu = os.environ.get("AGVDYN_AOT_CPU", "")  # "" numba's generic model of the architecture
+        cpu = os.environ.get("AGVDYN_AOT_CPU", "host")
+        cc.target_cpu = "" if cpu == "generic" else cpu  # "": numba's generic model of the architecture
         cc.verbose = False
         index, options_of = {}, {}
         for n, (qual, (dispatcher, entries)) in enumerate(sorted(kernels.items())):

@@ -8,9 +8,9 @@ importing numba (numba's per-process start, 0.3-0.4 s, issue 28); any other call
 kernel with numba as before. Otherwise ``njit`` is ``numba.njit`` itself.
 
 The numbers are the same bit for bit: numba compiles both from the same source with the same
-options (no fast-math, no contraction of multiply-adds); the ahead-of-time module for the
-architecture's generic CPU model (``AGVDYN_AOT_CPU`` at build time for another), so it runs on any
-machine of the architecture. ``AGVDYN_JIT=1`` (or numba's own ``NUMBA_CPU_NAME`` /
+options (no fast-math, no contraction of multiply-adds), for the host CPU (``AGVDYN_AOT_CPU`` at
+build time for another model, ``generic`` for the architecture's generic one); the stamp holds the
+CPU's model and flags, so that a module built on another CPU is not used. ``AGVDYN_JIT=1`` (or numba's own ``NUMBA_CPU_NAME`` /
 ``NUMBA_DISABLE_JIT``) forces numba's JIT for the process.
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["njit", "Kernel", "aot_index", "kernel_sources_stamp", "register_with_numba", "INDEX_FILE"]
+__all__ = ["njit", "Kernel", "aot_index", "cpu_fingerprint", "kernel_sources_stamp", "register_with_numba", "INDEX_FILE"]
 
 PACKAGE = Path(__file__).resolve().parent
 INDEX_FILE = PACKAGE / "_aot_kernels.json"
@@ -32,10 +32,22 @@ INDEX_FILE = PACKAGE / "_aot_kernels.json"
 _SCALAR_CODES = {float: "f8", int: "i8", bool: "b1"}
 
 
+def cpu_fingerprint() -> str:
+    """The host CPU's model and feature flags (Linux: /proc/cpuinfo), as text."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            lines = [line for line in f.read(65536).splitlines() if line.startswith(("model name", "flags"))]
+        return "\n".join(lines[:2])
+    except OSError:
+        import platform
+
+        return f"{platform.machine()} {platform.processor()}"
+
+
 def kernel_sources_stamp(files: list[str]) -> str:
-    """SHA-256 over the kernel source files (paths relative to the package) and the versions whose
-    ABI the compiled module depends on."""
-    digest = hashlib.sha256(f"{sys.version_info[:2]} numpy {np.__version__}".encode())
+    """SHA-256 over the kernel source files (paths relative to the package), the versions whose ABI
+    the compiled module depends on and the CPU it was compiled for (another CPU: numba's JIT)."""
+    digest = hashlib.sha256(f"{sys.version_info[:2]} numpy {np.__version__}\n{cpu_fingerprint()}".encode())
     for name in files:
         digest.update(name.encode())
         digest.update((PACKAGE / name).read_bytes())
@@ -75,14 +87,15 @@ def aot_index() -> dict | None:
 
 
 def _type_code(value) -> str | None:
-    """The index's code of an argument: ``f8:2`` for a 2-D float64 array, ``i8`` for an int."""
+    """The index's code of an argument: ``f8:2C`` for a C-contiguous 2-D float64 array (``A``: any
+    layout), ``i8`` for an int."""
     code = _SCALAR_CODES.get(type(value))
     if code is not None:
         return code
     if isinstance(value, np.ndarray):
         if value.dtype.byteorder == ">":
             return None
-        return f"{value.dtype.kind}{value.dtype.itemsize}:{value.ndim}"
+        return f"{value.dtype.kind}{value.dtype.itemsize}:{value.ndim}{'C' if value.flags.c_contiguous else 'A'}"
     if isinstance(value, np.generic):
         return f"{value.dtype.kind}{value.dtype.itemsize}"
     return None
@@ -104,7 +117,10 @@ class Kernel:
 
     def __call__(self, *args, **kwargs):
         if not kwargs and len(args) == self._nargs:
-            fn = self._compiled.get(tuple(_type_code(a) for a in args))
+            codes = tuple(_type_code(a) for a in args)
+            fn = self._compiled.get(codes)
+            if fn is None and None not in codes:  # the version for arrays of any layout
+                fn = self._compiled.get(tuple(c[:-1] + "A" if c.endswith("C") else c for c in codes))
             if fn is not None:
                 return fn(*args)
         return self.jit()(*args, **kwargs)
