@@ -29,22 +29,18 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA
     os.environ.setdefault(var, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import math  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from agvdyn.io.log import Log  # noqa: E402
 from agvdyn.kinematics import Mode  # noqa: E402
 from agvdyn.online import TrackerSettings, TrackResult, track  # noqa: E402
 from agvdyn.platform import PAPER_PARAMETERS as P, PROTOTYPE  # noqa: E402
-from agvdyn.simulation import SimulationSettings, simulate  # noqa: E402
 from agvdyn.simulation.payload import PayloadEvent  # noqa: E402
 from agvdyn.trajectories import experiment  # noqa: E402
+from study_tracking import FREE_DURATION, PALLET, false_alarm_study, print_results, simulated_log  # noqa: E402
 
-PALLET = (1.2, 0.8)
-FREE_DURATION = 600.0
 #: Goal of issue 31 for the offset (m).
 GOAL = 0.02
 
@@ -82,8 +78,7 @@ def run(seed: int, duration: float, turn_accel: float, settings: TrackerSettings
     """One run of the step study (module docstring)."""
     step = step_of_seed(seed)
     traj = experiment("driving", duration=duration, seed=seed)
-    sim = simulate(traj, settings=SimulationSettings(payload=(step,)), seed=seed)
-    log = Log.from_frame(sim.log_frame(), sidecar=sim.sidecar())
+    log, sim = simulated_log(traj, (step,), seed)
     truth = sim.payload_truth[0]
     true_m = np.array([truth.m_ch, truth.C_ch])
     out = {"seed": seed, "mass": step.mass, "y": step.y, "t_step": truth.t_applied, "y_c_true": truth.y_c}
@@ -109,17 +104,11 @@ def run(seed: int, duration: float, turn_accel: float, settings: TrackerSettings
 
 
 def false_alarms(hours: float, settings: TrackerSettings, first_seed: int = 101) -> dict:
-    runs = max(1, math.ceil(hours * 3600 / FREE_DURATION))
-    alarms, total, where, y_end = 0, 0.0, [], []
-    for seed in range(first_seed, first_seed + runs):
-        sim = simulate(experiment("driving", duration=FREE_DURATION, seed=seed), settings=SimulationSettings(), seed=seed)
-        log = Log.from_frame(sim.log_frame(), sidecar=sim.sidecar())
-        res = track([log], PROTOTYPE, P, settings=settings)
-        alarms += len(res.events)
-        where += [(seed, e.parameter, round(e.t_detected, 2)) for e in res.events]
-        total += float(log.t[-1] - log.t[0])
-        y_end.append((float(res.estimate[-1, 3]), float(res.std[-1, 3])))
-    return {"runs": runs, "hours": total / 3600, "alarms": alarms, "where": where, "y_c_end": y_end}
+    """The tracking study's step-free runs, with y_c (and its std) at the end of each."""
+    y_end: list[tuple[float, float]] = []
+    free = false_alarm_study(hours, settings, first_seed,
+                             observe=lambda res: y_end.append((float(res.estimate[-1, 3]), float(res.std[-1, 3]))))
+    return {**free, "y_c_end": y_end}
 
 
 def _err(r: dict, key: str, truth: float) -> tuple[float, float] | None:
@@ -185,17 +174,8 @@ def main() -> None:
         print(f"seed {r['seed']:2d}: {r['mass']:.0f} kg at y {r['y']:+.3f} m at {r['t_step']:.1f} s (y_c {r['y_c_true'] * 100:+.2f} cm);"
               f" detected {o['detected']:.2f} s, turn {o['turn']:.2f} s; y_c cm: before {fmt(o['y_c_before'])}, +3 s "
               f"{fmt(o['y_c_3s'])}, +5 s {fmt(o['y_c_5s'])}, end {fmt(o['y_c_end'])}")
-    if free is not None and free["where"]:
-        print("false alarms:", free["where"])
-    lines = table(rows, free)
-    if args.markdown:
-        print("\n| | |\n|---|---|\n" + "\n".join(f"| {k} | {v} |" for k, v in lines))
-    else:
-        print("\n".join(f"{k:66s} {v}" for k, v in lines))
+    print_results(table(rows, free), rows, free, args.markdown, args.json)
     print(f"({time.perf_counter() - t0:.0f} s)")
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump({"runs": rows, "free": free}, fh, indent=1, default=str)
 
 
 if __name__ == "__main__":

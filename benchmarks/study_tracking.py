@@ -173,13 +173,17 @@ def step_study(seeds: list[int], settings: TrackerSettings, accel: float, yaw_ac
     return rows
 
 
-def false_alarm_study(hours: float, settings: TrackerSettings, first_seed: int = 101, engine: str = "ours") -> dict:
-    """Alarms on step-free driving: ``hours`` in runs of 600 s (seeds ``first_seed``, ...)."""
+def false_alarm_study(hours: float, settings: TrackerSettings, first_seed: int = 101, engine: str = "ours",
+                      observe=None) -> dict:
+    """Alarms on step-free driving: ``hours`` in runs of 600 s (seeds ``first_seed``, ...); ``observe``
+    (optional) is called with each run's :class:`TrackResult`."""
     runs = max(1, math.ceil(hours * 3600 / FREE_DURATION))
     alarms, total, where = 0, 0.0, []
     for seed in range(first_seed, first_seed + runs):
         log, _ = simulated_log(experiment("driving", duration=FREE_DURATION, seed=seed), (), seed, engine)
         res = track([log], PROTOTYPE, P, settings=settings)
+        if observe is not None:
+            observe(res)
         alarms += len(res.events)
         where += [(seed, e.parameter, round(e.t_detected, 2)) for e in res.events]
         total += float(log.t[-1] - log.t[0])
@@ -260,17 +264,24 @@ def main() -> None:
     t2 = time.perf_counter()
     for r in rows:
         print(run_line(r))
+    print_results(acceptance_table(rows, free), rows, free, args.markdown, args.json)
+    print(f"(step study {t1 - t0:.0f} s, false-alarm study {t2 - t1:.0f} s)")
+
+
+def print_results(lines: list[tuple[str, str]], rows: list[dict], free: dict | None, markdown: bool,
+                  json_path: str | None) -> None:
+    """Where the false alarms were, the acceptance table (Markdown rows, or aligned text) and, when
+    ``json_path`` is given, every run's figures as JSON."""
     if free is not None and free["where"]:
         print("false alarms:", free["where"])
-    table = acceptance_table(rows, free)
-    if args.markdown:
-        print("\n| | |\n|---|---|\n" + "\n".join(f"| {k} | {v} |" for k, v in table))
+    if markdown:
+        print("\n| | |\n|---|---|\n" + "\n".join(f"| {k} | {v} |" for k, v in lines))
     else:
-        print("\n".join(f"{k:70s} {v}" for k, v in table))
-    print(f"(step study {t1 - t0:.0f} s, false-alarm study {t2 - t1:.0f} s)")
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"runs": rows, "free": free}, fh, indent=1, default=float)
+        width = max((len(k) for k, _ in lines), default=0) + 2
+        print("\n".join(f"{k:{width}s} {v}" for k, v in lines))
+    if json_path:
+        with open(json_path, "w", encoding="utf-8") as fh:
+            json.dump({"runs": rows, "free": free}, fh, indent=1, default=str)
 
 
 if __name__ == "__main__":

@@ -24,8 +24,8 @@ from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.model_search import concentrated_likelihood, delay_evidence
 from agvdyn.model_spec import ModelSpec
 
-__all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows", "bic_on_rows",
-           "ROWS_CHOICES", "HOLDOUT_PARTS"]
+__all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows",
+           "bic_on_rows", "ROWS_CHOICES", "HOLDOUT_PARTS"]
 
 #: Parts of each segment in the held-out error's cross-validation.
 HOLDOUT_PARTS = 4
