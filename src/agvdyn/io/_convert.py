@@ -4,10 +4,13 @@ from __future__ import annotations
 from collections.abc import Mapping as MappingABC
 from dataclasses import dataclass
 
-import numpy as np
-from agvdyn._lazy import pandas as pd
+from pathlib import Path
 
-from agvdyn.io.log import LOG_COLUMNS, SEGMENT_COLUMN, LogError
+import numpy as np
+
+from agvdyn.io.columns import label_codes
+from agvdyn.io.log import LOG_COLUMNS, Log, LogError
+from agvdyn.io.schema import checked_columns
 from agvdyn.io.mapping import HEADING_QUANTITIES, LogMapping, SegmentRange
 
 #: How signals are brought onto one uniform time base (stated in sidecars and docs/io.md).
@@ -129,11 +132,14 @@ def check_coupling(signals: dict[str, np.ndarray], t: np.ndarray, mapping: LogMa
     return worst
 
 
-def assemble_frame(t: np.ndarray, signals: dict[str, np.ndarray], segments: np.ndarray | None) -> pd.DataFrame:
-    """Our schema's table from SI signals (headings dropped) and optional segment names."""
-    data = {"t": t}
-    data.update({c: signals[c] for c in LOG_COLUMNS[1:]})
-    frame = pd.DataFrame(data)
-    if segments is not None:
-        frame[SEGMENT_COLUMN] = segments  # names are checked by check_frame
-    return frame
+def converted_log(path: Path, t: np.ndarray, signals: dict[str, np.ndarray], segments: np.ndarray | None,
+                  conversion: dict, source: str, *, max_gap_samples: float, stop_tolerance: float) -> Log:
+    """The checked :class:`Log` of SI signals (headings dropped) and optional segment names, with
+    ``conversion`` as its sidecar (rows clipped to the stops added): no DataFrame on the way."""
+    columns = {"t": t, **{c: signals[c] for c in LOG_COLUMNS[1:]}}
+    segment = None if segments is None else label_codes(segments)
+    lazy, clipped = checked_columns(columns, segment, source, max_gap_samples=max_gap_samples,
+                                    stop_tolerance=stop_tolerance)
+    if any(clipped.values()):
+        conversion["clipped_to_stops"] = dict(clipped)
+    return Log.from_checked(path, lazy, {"conversion": conversion}, clipped)

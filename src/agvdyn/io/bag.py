@@ -26,14 +26,14 @@ from agvdyn.io._convert import (
     DEFAULT_GAP_PERIODS,
     RESAMPLING_METHOD,
     Series,
-    assemble_frame,
     check_coupling,
+    converted_log,
     gap_points,
     resample,
     segments_from_ranges,
     uniform_grid,
 )
-from agvdyn.io.log import MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError, _check
+from agvdyn.io.log import MAX_GAP_SAMPLES, STOP_TOLERANCE, Log, LogError
 from agvdyn.io.mapping import InputKind, LogMapping, MappingError, Stamps, gear_ratio
 from agvdyn.platform import Geometry
 from agvdyn.time_base import fit_stamps, round_period_ns
@@ -302,9 +302,6 @@ def read_bag(
     signals = {k: v[keep] for k, v in resample(series, grid).items()}
     segments = segments_from_ranges(t, mapping.segments) if isinstance(mapping.segments, tuple) else None
     coupling = check_coupling(signals, t, mapping, str(path))
-    frame = assemble_frame(t, signals, segments)
-    checked, clipped = _check(frame, f"{path} (converted with {mapping.path or 'mapping'})",
-                              max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     conversion = {
         "input": "ros2_bag", "file": str(path), "mapping": str(mapping.path) if mapping.path else None,
         "topic": mapping.topic, "time": time_kind, "t0_ns": t0_ns, "rate": 1e9 / period_ns,
@@ -314,6 +311,5 @@ def read_bag(
     }
     if coupling:
         conversion["coupling_max_deviation"] = coupling
-    if any(clipped.values()):
-        conversion["clipped_to_stops"] = dict(clipped)
-    return Log(path, checked, {"conversion": conversion}, clipped)
+    return converted_log(path, t, signals, segments, conversion, f"{path} (converted with {mapping.path or 'mapping'})",
+                         max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)

@@ -108,6 +108,14 @@ class Log:
                                   stop_tolerance=stop_tolerance)
         return cls(None if path is None else Path(path), checked, dict(sidecar or {}), clipped)
 
+    @classmethod
+    def from_checked(cls, path: Path | None, lazy: LazyFrame, sidecar: Any, clipped: dict[str, int]) -> "Log":
+        """A Log of columns already checked (:func:`checked_columns`): no DataFrame until ``frame`` is asked for."""
+        log = cls(path, lazy, sidecar, clipped)  # type: ignore[arg-type]
+        object.__setattr__(log, "_block", lazy.block)
+        log.__dict__["sample_time"] = lazy.sample_time  # the checks' nominal step: not taken twice
+        return log
+
     def _array(self, columns: tuple[str, ...] | str) -> np.ndarray:
         block = self.__dict__.get("_block")
         if block is not None:  # read by read_log: views of the one float block the frame shares
@@ -284,10 +292,7 @@ def read_log(
     columns = our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
     if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
         lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
-        log = Log(path, lazy, sidecar_text(sidecar_path(path)), clipped)  # type: ignore[arg-type]
-        object.__setattr__(log, "_block", lazy.block)
-        log.__dict__["sample_time"] = lazy.sample_time  # the checks' nominal step: not taken twice
-        return log
+        return Log.from_checked(path, lazy, sidecar_text(sidecar_path(path)), clipped)
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
                               csv_rows=path.suffix.lower() == ".csv")

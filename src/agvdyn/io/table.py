@@ -11,8 +11,8 @@ from agvdyn.io._convert import (
     DEFAULT_GAP_PERIODS,
     RESAMPLING_METHOD,
     Series,
-    assemble_frame,
     check_coupling,
+    converted_log,
     gap_points,
     resample,
     segments_from_ranges,
@@ -25,7 +25,6 @@ from agvdyn.io.schema import (
     SEGMENT_COLUMN,
     STOP_TOLERANCE,
     LogError,
-    _check,
     _numeric_column,
     _row_text,
     _time_text,
@@ -136,13 +135,9 @@ def read_mapped_table(
     coupling = check_coupling(signals, t, mapping, str(path))
     if coupling:
         conversion["coupling_max_deviation"] = coupling
-    frame = assemble_frame(t, signals, segments)
-    checked, clipped = _check(frame, f"{path} (converted with {mapping.path or 'mapping'})",
-                              max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     conversion["notes"] = notes
-    if any(clipped.values()):
-        conversion["clipped_to_stops"] = dict(clipped)
-    return Log(path, checked, {"conversion": conversion}, clipped)
+    return converted_log(path, t, signals, segments, conversion, f"{path} (converted with {mapping.path or 'mapping'})",
+                         max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
 
 
 def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
