@@ -20,7 +20,8 @@ import yaml
 from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
 from agvdyn.time_base import stamp_interval
-from agvdyn.io.columns import checked_arrays
+from agvdyn.io.columns import checked_arrays, label_codes
+from agvdyn.io.csv_columns import csv_columns
 from agvdyn.io.parquet import (  # noqa: F401  (re-exported)
     our_parquet_columns, parquet_metadata, write_our_parquet, write_parquet_columns)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text
@@ -292,6 +293,13 @@ def read_log(
     columns = our_parquet_columns(path) if path.suffix.lower() == ".parquet" and path.is_file() else None
     if columns is not None:  # our own Parquet: columns straight to numpy, no DataFrame on the way
         lazy, clipped = checked_columns(*columns, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
+        return Log.from_checked(path, lazy, sidecar_text(sidecar_path(path)), clipped)
+    plain = csv_columns(path, LOG_COLUMNS, [SEGMENT_COLUMN], exactly=True) if path.suffix.lower() == ".csv" \
+        and path.is_file() else None
+    if plain is not None and all(c in plain for c in LOG_COLUMNS):  # a plain CSV of our columns: no pandas
+        segment = label_codes(plain.pop(SEGMENT_COLUMN)) if SEGMENT_COLUMN in plain else None
+        lazy, clipped = checked_columns(plain, segment, path, max_gap_samples=max_gap_samples,
+                                        stop_tolerance=stop_tolerance, csv_rows=True)
         return Log.from_checked(path, lazy, sidecar_text(sidecar_path(path)), clipped)
     frame = read_table(path)
     checked, clipped = _check(frame, path, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,

@@ -226,6 +226,7 @@ def checked_columns(
     max_gap_samples: float,
     stop_tolerance: float,
     clip: bool = True,
+    csv_rows: bool = False,
 ) -> tuple[LazyFrame, dict[str, int]]:
     """The checks of :func:`check_frame` on columns read straight from a file in our schema:
     ``columns`` float64 arrays of every name in :data:`LOG_COLUMNS`, ``segment`` (category names
@@ -240,8 +241,8 @@ def checked_columns(
     for k, col in enumerate(LOG_COLUMNS):
         block[:, k] = columns[col]
     clipped, nominal = _check_block(block, source, max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance,
-                                    max_sample_time=MAX_SAMPLE_TIME, csv_rows=False, clip=clip)
-    codes = None if segment is None else _segment_codes(segment[0], segment[1], source, block[:, 0], False)
+                                    max_sample_time=MAX_SAMPLE_TIME, csv_rows=csv_rows, clip=clip)
+    codes = None if segment is None else _segment_codes(segment[0], segment[1], source, block[:, 0], csv_rows)
     block.setflags(write=False)
     return LazyFrame(block, codes, nominal), clipped
 

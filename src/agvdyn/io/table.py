@@ -18,6 +18,8 @@ from agvdyn.io._convert import (
     segments_from_ranges,
     uniform_grid,
 )
+from agvdyn.io.columns import label_codes
+from agvdyn.io.csv_columns import csv_columns
 from agvdyn.io.log import Log, read_table
 from agvdyn.io.schema import (
     MAX_GAP_SAMPLES,
@@ -71,20 +73,29 @@ def read_mapped_table(
     if mapping.input is not InputKind.TABLE:
         raise MappingError(f"{mapping.path or 'mapping'}: input is {mapping.input.value}, but {path} is a table: use a mapping with input: table")
     i_G, i_G_source = gear_ratio(mapping, geometry)
-    raw = read_table(path)
     csv = path.suffix.lower() == ".csv"
     needed = {mapping.time_column: "time.column"}
     for s in mapping.signals:
         needed.setdefault(s.source, f"signals.{s.quantity}")
-    if isinstance(mapping.segments, SegmentColumn):
-        needed.setdefault(mapping.segments.column, "segments.column")
-    missing = [(c, k) for c, k in needed.items() if c not in raw.columns]
+    label_column = mapping.segments.column if isinstance(mapping.segments, SegmentColumn) else None
+    if label_column is not None:
+        needed.setdefault(label_column, "segments.column")
+    numbers = [c for c in needed if c != label_column]
+    raw: dict[str, np.ndarray] | pd.DataFrame | None = None
+    if csv and path.is_file() and label_column not in {s.source for s in mapping.signals}:  # plain CSV tables: pyarrow's parser, no pandas (io/csv_columns.py)
+        raw = csv_columns(path, numbers, [label_column or SEGMENT_COLUMN])
+    if raw is None:
+        raw = read_table(path)
+    found = list(raw) if isinstance(raw, dict) else [str(c) for c in raw.columns]
+    missing = [(c, k) for c, k in needed.items() if c not in found]
+    if missing and isinstance(raw, dict):  # name every column found: read the header again with pandas
+        found = [str(c) for c in read_table(path).columns]
     if missing:
         listed = ", ".join(f"{c!r} (mapping key {k})" for c, k in missing)
-        raise LogError(f"{path}: missing columns {listed}; columns found: {[str(c) for c in raw.columns]}")
+        raise LogError(f"{path}: missing columns {listed}; columns found: {found}")
 
     def column(name: str) -> np.ndarray:
-        values = _numeric_column(raw[name], str(path), name, csv)
+        values = raw[name] if isinstance(raw, dict) else _numeric_column(raw[name], str(path), name, csv)
         bad = ~np.isfinite(values)
         if bad.any():
             row = int(np.argmax(bad))
@@ -107,8 +118,8 @@ def read_mapped_table(
 
     seg_src: np.ndarray | None = None
     if isinstance(mapping.segments, SegmentColumn):
-        seg_src = _segment_names(raw[mapping.segments.column], dict(mapping.segments.names))
-    elif mapping.segments is None and SEGMENT_COLUMN in raw.columns:
+        seg_src = _segment_names(raw[label_column], dict(mapping.segments.names))
+    elif mapping.segments is None and SEGMENT_COLUMN in found:
         seg_src = _segment_names(raw[SEGMENT_COLUMN], {})
 
     conversion: dict = {"input": "table", "file": str(path), "mapping": str(mapping.path) if mapping.path else None,
@@ -162,8 +173,13 @@ def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
     )
 
 
-def _segment_names(column: pd.Series, names: dict[str, str]) -> np.ndarray:
+def _segment_names(column: pd.Series | np.ndarray, names: dict[str, str]) -> np.ndarray:
     """Segment names of a column (stripped text, translated by ``names``), None where empty."""
+    if isinstance(column, np.ndarray):  # read by csv_columns: stripped already, None where empty
+        if not names:
+            return column
+        distinct, codes = label_codes(column)
+        return np.array([names.get(v, v) for v in distinct] + [None], dtype=object)[codes]
     col = column.astype("string").str.strip()
     col = col.mask(col == "", pd.NA)
     if names:

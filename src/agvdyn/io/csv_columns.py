@@ -1,0 +1,94 @@
+"""CSV tables read straight to numpy columns by pyarrow's CSV parser, without pandas (issue 28:
+importing pandas was ~0.12 s of a fresh command on a data-logger CSV).
+
+Only plain tables take this path: unique column names without surrounding blanks, the number
+columns all numbers (integers or floats, no empty field, no NA marker), the label columns integers
+or text. Anything else (booleans, a text cell in a number column, a missing value, dates) returns
+None and the caller reads the file with pandas, whose reading gives the messages that name the
+first offending row. Numbers are parsed correctly rounded (pyarrow's parser; pandas' own parser may
+differ from it in the last bit of a long decimal: tests/test_io_csv_columns.py).
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from typing import Any
+
+import numpy as np
+
+from agvdyn.io.columns import label_codes
+from agvdyn.io.parquet import _NUMPY_TYPES, _numbers, _valid
+
+__all__ = ["csv_columns", "NA_MARKERS"]
+
+#: Cells that pandas' ``read_csv`` reads as missing by default; here too, so a label column of
+#: ``NA`` means "no segment" either way and a number column holding one goes to pandas.
+NA_MARKERS = ("", "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN",
+              "<NA>", "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null")
+
+
+def csv_columns(path: Path, numbers: Iterable[str], labels: Iterable[str] = (), *, exactly: bool = False
+                ) -> dict[str, np.ndarray] | None:
+    """The named columns of a CSV file as numpy arrays: ``numbers`` float64, ``labels`` object
+    arrays of stripped text (integers written as text; None where empty or NA). Columns the file
+    lacks are left out (the caller names them). None when the table is not plain (module docstring)
+    or, with ``exactly``, has other columns.
+    Arrow buffers are read directly: pyarrow's to_numpy and compute functions import pandas."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    try:
+        table = pcsv.read_csv(
+            path,
+            read_options=pcsv.ReadOptions(use_threads=False),
+            convert_options=pcsv.ConvertOptions(null_values=list(NA_MARKERS), strings_can_be_null=True,
+                                                quoted_strings_can_be_null=False, timestamp_parsers=[],
+                                                auto_dict_encode=True),
+        )
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, UnicodeDecodeError):
+        return None
+    names = table.column_names
+    numbers, labels = list(dict.fromkeys(numbers)), list(dict.fromkeys(labels))
+    if len(set(names)) != len(names) or any(n != n.strip() or not n for n in names):
+        return None
+    if exactly and set(names) - set(numbers) - set(labels):
+        return None
+    out: dict[str, np.ndarray] = {}
+    for name in numbers:
+        if name in names:
+            col = table.column(name)
+            kind = _NUMPY_TYPES.get(str(col.type))
+            if kind is None or col.null_count:
+                return None
+            out[name] = _numbers(col.chunks, kind).astype(np.float64)
+    for name in labels:
+        if name in names and name not in out:
+            text = _label_text(table.column(name))
+            if text is None:
+                return None
+            out[name] = text
+    return out
+
+
+def _label_text(col: Any) -> np.ndarray | None:
+    """A label column's rows as stripped text (None where empty), or None for a column pandas would
+    read otherwise (floats; integers with gaps, which pandas reads as floats)."""
+    import pyarrow as pa
+
+    if pa.types.is_integer(col.type) and not col.null_count:
+        distinct, codes = label_codes(_numbers(col.chunks, _NUMPY_TYPES[str(col.type)]))
+        names: list[Any] = [str(v) for v in distinct]
+    elif pa.types.is_dictionary(col.type) and pa.types.is_string(col.type.value_type):
+        col = col.unify_dictionaries().combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+        codes = _numbers([col.indices], np.dtype(f"int{col.type.index_type.bit_width}")).astype(np.int64)
+        if col.indices.null_count:
+            codes[~_valid(col.indices)] = -1
+        names = col.dictionary.to_pylist()
+    elif pa.types.is_string(col.type) or pa.types.is_null(col.type):  # more labels than auto_dict_encode takes
+        distinct, codes = label_codes(np.array(col.to_pylist(), dtype=object))
+        names = list(distinct)
+    else:
+        return None
+    clean = [None if v is None or not v.strip() else v.strip() for v in names]
+    return np.array(clean + [None], dtype=object)[codes]
