@@ -21,7 +21,7 @@ from agvdyn._files import write_atomically, write_text_atomically
 from agvdyn.platform import Geometry
 from agvdyn.time_base import stamp_interval
 from agvdyn.io.columns import checked_arrays, label_codes
-from agvdyn.io.csv_columns import csv_columns
+from agvdyn.io.table_columns import csv_columns
 from agvdyn.io.parquet import (  # noqa: F401  (re-exported)
     our_parquet_columns, parquet_metadata, write_our_parquet, write_parquet_columns)
 from agvdyn.io.sidecar import LazySidecar, sidecar_text

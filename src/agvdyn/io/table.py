@@ -19,7 +19,7 @@ from agvdyn.io._convert import (
     uniform_grid,
 )
 from agvdyn.io.columns import label_codes
-from agvdyn.io.csv_columns import csv_columns
+from agvdyn.io.table_columns import table_columns
 from agvdyn.io.log import Log, read_table
 from agvdyn.io.schema import (
     MAX_GAP_SAMPLES,
@@ -82,8 +82,8 @@ def read_mapped_table(
         needed.setdefault(label_column, "segments.column")
     numbers = [c for c in needed if c != label_column]
     raw: dict[str, np.ndarray] | pd.DataFrame | None = None
-    if csv and path.is_file() and label_column not in {s.source for s in mapping.signals}:  # plain CSV tables: pyarrow's parser, no pandas (io/csv_columns.py)
-        raw = csv_columns(path, numbers, [label_column or SEGMENT_COLUMN])
+    if path.is_file() and label_column not in {s.source for s in mapping.signals}:  # plain tables: no pandas
+        raw = table_columns(path, numbers, [label_column or SEGMENT_COLUMN])
     if raw is None:
         raw = read_table(path)
     found = list(raw) if isinstance(raw, dict) else [str(c) for c in raw.columns]
@@ -175,7 +175,7 @@ def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
 
 def _segment_names(column: pd.Series | np.ndarray, names: dict[str, str]) -> np.ndarray:
     """Segment names of a column (stripped text, translated by ``names``), None where empty."""
-    if isinstance(column, np.ndarray):  # read by csv_columns: stripped already, None where empty
+    if isinstance(column, np.ndarray):  # read by table_columns: stripped already, None where empty
         if not names:
             return column
         distinct, codes = label_codes(column)

@@ -1,4 +1,4 @@
-"""CSV tables read by pyarrow's parser without pandas (io/csv_columns.py, issue 28): the numbers are
+"""CSV tables read by pyarrow's parser without pandas (io/table_columns.py, issue 28): the numbers are
 Python's correctly rounded ``float`` of each cell, the labels pandas' reading of them, every table
 that is not plain goes to pandas (whose messages name the row), and the resulting logs equal the
 pandas path's, column for column."""
@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import agvdyn.io.log as log_module
 import agvdyn.io.table as table_module
 from agvdyn.io.load import load_log
-from agvdyn.io.csv_columns import csv_columns
+from agvdyn.io.table_columns import csv_columns, parquet_columns
 from agvdyn.io.log import LogError, read_log, write_log
 from agvdyn.platform import PROTOTYPE
 from test_import_cost import _heavy_imports
@@ -80,7 +80,7 @@ def test_labels_read_as_pandas_reads_them(tmp_path):
 
 
 def _without_fast_path(monkeypatch):
-    monkeypatch.setattr(table_module, "csv_columns", lambda *a, **k: None)
+    monkeypatch.setattr(table_module, "table_columns", lambda *a, **k: None)
     monkeypatch.setattr(log_module, "csv_columns", lambda *a, **k: None)
 
 
@@ -126,6 +126,36 @@ def test_bad_cells_keep_pandas_messages(tmp_path):
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(LogError, match=r"column 'alpha_l', row 4 \(line 6 of the file\).*'oops' is not a number"):
         read_log(path)
+
+
+@pytest.mark.parametrize("phase", ["int", "category", "text"])
+def test_mapped_parquet_log_equals_the_pandas_path(tmp_path, monkeypatch, phase):
+    datalogger_csv(tmp_path / "logger.csv", np.arange(0, 6.0, 0.002))
+    frame = pd.read_csv(tmp_path / "logger.csv")
+    frame["cur_FL"] = frame["cur_FL"].astype(np.float32)  # narrower floats are widened alike
+    if phase != "int":
+        frame["phase"] = frame["phase"].astype(str).astype("category" if phase == "category" else object)
+    path = tmp_path / "logger.parquet"
+    frame.to_parquet(path)
+    cols = parquet_columns(path, ["time_ms", "cur_FL"], ["phase"])
+    assert cols["cur_FL"].dtype == np.float64 and cols["phase"][0] in {"0", "1", "4"}
+    fast = load_log(path, DATALOGGER, PROTOTYPE)
+    _without_fast_path(monkeypatch)
+    _assert_same_log(fast, load_log(path, DATALOGGER, PROTOTYPE))
+
+
+@pytest.mark.parametrize("column, why", [
+    (pd.array([0.5, None, 1.0], dtype="Float64"), "a null"), (np.array([True, False, True]), "booleans"),
+    (pd.to_datetime(["2024-01-01", "2024-01-02", "2024-01-03"]), "times"),
+])
+def test_a_parquet_number_column_that_is_not_plain_goes_to_pandas(tmp_path, column, why):
+    path = tmp_path / "t.parquet"
+    pd.DataFrame({"t": [0.0, 1.0, 2.0], "a": column}).to_parquet(path)
+    assert parquet_columns(path, ["t", "a"]) is None, why
+    assert parquet_columns(path, ["t"])["t"].tolist() == [0.0, 1.0, 2.0]
+    floats = tmp_path / "floats.parquet"
+    pd.DataFrame({"t": [0.0, 1.0, 2.0], "phase": [0.0, 1.0, 1.0]}).to_parquet(floats)  # pandas: "0.0"
+    assert parquet_columns(floats, ["t"], ["phase"]) is None
 
 
 def test_inspect_on_a_mapped_csv_imports_no_pandas(tmp_path):

@@ -1,4 +1,4 @@
-"""CSV tables read straight to numpy columns by pyarrow's CSV parser, without pandas (issue 28:
+"""CSV and Parquet tables read straight to numpy columns by pyarrow, without pandas (issue 28:
 importing pandas was ~0.12 s of a fresh command on a data-logger CSV).
 
 Only plain tables take this path: unique column names without surrounding blanks, the number
@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 
 from agvdyn.io.columns import label_codes
-from agvdyn.io.parquet import _NUMPY_TYPES, _numbers, _valid
+from agvdyn.io.parquet import _NUMPY_TYPES, _numbers, _parquet_file, _valid
 
-__all__ = ["csv_columns", "NA_MARKERS"]
+__all__ = ["csv_columns", "parquet_columns", "table_columns", "NA_MARKERS"]
 
 #: Cells that pandas' ``read_csv`` reads as missing by default; here too, so a label column of
 #: ``NA`` means "no segment" either way and a number column holding one goes to pandas.
@@ -58,6 +58,37 @@ def csv_columns(path: Path, numbers: Iterable[str], labels: Iterable[str] = (), 
         return None
     if exactly and set(names) - set(numbers) - set(labels):
         return None
+    return _columns(table, numbers, labels)
+
+
+def parquet_columns(path: Path, numbers: Iterable[str], labels: Iterable[str] = ()) -> dict[str, np.ndarray] | None:
+    """:func:`csv_columns` for a Parquet file: number columns of integers or floats without nulls,
+    label columns of integers without nulls or text (plain or dictionary-encoded)."""
+    import pyarrow.parquet as pq
+
+    numbers, labels = list(dict.fromkeys(numbers)), list(dict.fromkeys(labels))
+    try:
+        names = _parquet_file(path).schema_arrow.names
+        text = [c for c in labels if c in names and c not in numbers]  # read as dictionaries: no per-row strings
+        file = pq.ParquetFile(path, read_dictionary=text or None)
+        wanted = [c for c in dict.fromkeys(numbers + labels) if c in names]
+        table = file.read(columns=wanted, use_pandas_metadata=False, use_threads=False)
+    except Exception:  # noqa: BLE001 - pandas reads it and says what is wrong
+        return None
+    if len(set(names)) != len(names):
+        return None
+    return _columns(table, numbers, labels)
+
+
+def table_columns(path: Path, numbers: Iterable[str], labels: Iterable[str] = ()) -> dict[str, np.ndarray] | None:
+    """:func:`csv_columns` or :func:`parquet_columns` by the file's suffix."""
+    read = csv_columns if Path(path).suffix.lower() == ".csv" else parquet_columns
+    return read(path, numbers, labels)
+
+
+def _columns(table: Any, numbers: list[str], labels: list[str]) -> dict[str, np.ndarray] | None:
+    """The numbers and labels of an Arrow table that has them (absent ones left out), None if not plain."""
+    names = table.column_names
     out: dict[str, np.ndarray] = {}
     for name in numbers:
         if name in names:
@@ -83,16 +114,22 @@ def _label_text(col: Any) -> np.ndarray | None:
     if pa.types.is_integer(col.type) and not col.null_count:
         distinct, codes = label_codes(_numbers(col.chunks, _NUMPY_TYPES[str(col.type)]))
         names: list[Any] = [str(v) for v in distinct]
-    elif pa.types.is_dictionary(col.type) and pa.types.is_string(col.type.value_type):
+    elif pa.types.is_dictionary(col.type) and _is_text(col.type.value_type) and pa.types.is_integer(col.type.index_type):
         col = col.unify_dictionaries().combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-        codes = _numbers([col.indices], np.dtype(f"int{col.type.index_type.bit_width}")).astype(np.int64)
+        codes = _numbers([col.indices], _NUMPY_TYPES[str(col.type.index_type)]).astype(np.int64)
         if col.indices.null_count:
             codes[~_valid(col.indices)] = -1
         names = col.dictionary.to_pylist()
-    elif pa.types.is_string(col.type) or pa.types.is_null(col.type):  # more labels than auto_dict_encode takes
+    elif _is_text(col.type) or pa.types.is_null(col.type):  # more labels than auto_dict_encode takes
         distinct, codes = label_codes(np.array(col.to_pylist(), dtype=object))
         names = list(distinct)
     else:
         return None
     clean = [None if v is None or not v.strip() else v.strip() for v in names]
     return np.array(clean + [None], dtype=object)[codes]
+
+
+def _is_text(kind: Any) -> bool:
+    import pyarrow as pa
+
+    return pa.types.is_string(kind) or pa.types.is_large_string(kind)
