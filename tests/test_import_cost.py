@@ -8,7 +8,9 @@ The default ``identify`` and ``inspect`` need none of them: numpy's LU solve for
 factors (an ulp from scipy's solve_triangular), numpy's FFT in double precision for the correlation
 time, and our own Student's t quantile for the intervals (tests/test_scipy_free_numerics.py);
 ``validate`` needs none, nor ``simulate`` (its log is written from numpy columns, tests/test_log_columns.py).
-Only ``import scipy`` itself (its version, the key of the filter cache) is left."""
+Only ``import scipy`` itself (its version, the key of the filter cache) is left. ``identify`` of a ROS 2 bag
+imports no rosbags either (the storage files read by agvdyn.io._bag_storage, the messages decoded by
+agvdyn.io._cdr); rosbags is probed for every command."""
 from __future__ import annotations
 
 import json
@@ -25,7 +27,7 @@ HEAVY = ("pandas", "matplotlib", "scipy.")
 found = {}
 class Hook:
     def find_spec(self, name, path=None, target=None):
-        if name in found or not (name in ("pandas", "matplotlib") or
+        if name in found or not (name in ("pandas", "matplotlib", "rosbags") or
                                  (name.startswith("scipy.") and name.count(".") == 1 and not name.startswith("scipy._"))):
             return None
         stack = [f.filename for f in traceback.extract_stack()[:-1]]
@@ -90,3 +92,18 @@ def test_validate_imports_neither_pandas_nor_scipy(simulated):
                  ["validate", "log.parquet", "--params", "p.yaml", "--json"]):
         found = _heavy_imports(args, folder)
         assert found == {}, f"agvdyn {' '.join(args)} imported {found}"
+
+
+def test_identify_of_a_bag_imports_neither_rosbags_nor_pandas_nor_scipy(simulated):
+    """An MCAP bag written by write_bag (rosbags' Writer) from the simulated log, identified through a mapping."""
+    from agvdyn.io import read_log, read_mapping, write_bag
+    from agvdyn.platform import PROTOTYPE
+
+    folder, _ = simulated
+    example = Path(__file__).resolve().parents[1] / "examples" / "mappings" / "ros2_control.yaml"
+    mapping = folder / "bag.yaml"
+    mapping.write_text(example.read_text() + f"\ni_G: {PROTOTYPE.i_G!r}\n")
+    if not (folder / "bag").exists():
+        write_bag(read_log(folder / "log.parquet"), folder / "bag", read_mapping(mapping), "mcap")
+    found = _heavy_imports(["identify", "bag", "--mapping", str(mapping), "--out", "pb.yaml"], folder)
+    assert found == {}, f"identify of a bag imported {found}"

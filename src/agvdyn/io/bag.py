@@ -1,6 +1,10 @@
 """ROS 2 bags (sqlite3 and MCAP) with ``sensor_msgs/msg/JointState``, read and written without ROS.
 
-Reading uses the ``rosbags`` library. A ros2_control vehicle publishes its joints at slightly
+Reading takes the raw messages of the topic in bulk from the storage files
+(:mod:`agvdyn.io._bag_storage`: indexed MCAP, sqlite3, rosbag2 directories) and decodes them per
+layout with numpy (:mod:`agvdyn.io._cdr`), without importing ``rosbags``; bags that reader leaves
+(compressed directories, unindexed MCAP, anything odd) and messages our decoder refuses are read by
+the ``rosbags`` library, as before. A ros2_control vehicle publishes its joints at slightly
 irregular times, possibly in several messages per cycle (for example steering and wheel
 joints from different controllers). Every mapped signal (position of angle joints, effort of
 torque joints) is taken as its own time series and resampled by linear interpolation onto one
@@ -16,12 +20,15 @@ their own rate, not that of the interleaved message stream.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from agvdyn.io._bag_storage import StorageTopic, read_topic
+from agvdyn.io._cdr import JointRows, decode_joint_state_table
 from agvdyn.io._convert import (
     DEFAULT_GAP_PERIODS,
     RESAMPLING_METHOD,
@@ -73,57 +80,83 @@ def _joint_state_typestore():
 
 @dataclass(frozen=True)
 class _Messages:
-    """JointState messages of one topic, in bag order."""
+    """JointState messages of one topic, in bag order, vectorised per joint-name layout."""
 
     stamps: np.ndarray  # (M,) int64 ns, header stamps
     received: np.ndarray  # (M,) int64 ns, bag receive times
-    names: list[tuple[str, ...]]
-    position: list[np.ndarray]
-    effort: list[np.ndarray]
+    layouts: dict[tuple[str, ...], JointRows]
+
+
+def _rosbags_deserializer() -> Callable[[bytes], object]:
+    """rosbags' decoder of one JointState, its type store built (and rosbags imported) at the first call."""
+    store = []
+
+    def deserialize(raw: bytes):
+        if not store:
+            store.append(_joint_state_typestore())
+        return store[0].deserialize_cdr(raw, JOINT_STATE)
+
+    return deserialize
+
+
+def _check_topic(path: Path, topic: str, connections, topic_types) -> None:
+    if not topic_types:
+        found = dict(connections)
+        raise LogError(f"{path}: no topic {topic!r} in the bag; topics found: {found}; set 'topic' in the mapping")
+    wrong = [t for t in topic_types if t != JOINT_STATE]
+    if wrong:
+        raise LogError(f"{path}: topic {topic!r} has message type {wrong[0]}: expected {JOINT_STATE}")
+
+
+def _read_raw_rosbags(path: Path, topic: str) -> StorageTopic:
+    """The raw messages of ``topic`` read by rosbags' Reader (the bags :mod:`agvdyn.io._bag_storage` leaves to it)."""
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    received, raws = [], []
+    try:
+        with Reader(path) as reader:
+            connections = tuple((c.topic, c.msgtype) for c in reader.connections)
+            conns = [c for c in reader.connections if c.topic == topic]
+            _check_topic(path, topic, connections, [c.msgtype for c in conns])
+            for _conn, timestamp, raw in reader.messages(connections=conns):
+                received.append(timestamp)
+                raws.append(raw)
+    except (ReaderError, FileNotFoundError) as exc:
+        raise LogError(f"{path}: cannot be read as a ROS 2 bag (sqlite3 or MCAP): {exc}") from exc
+    sizes = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+    offsets = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64) if raws else sizes
+    return StorageTopic(connections, ("cdr",) * len(conns), np.frombuffer(b"".join(raws), dtype=np.uint8), offsets, sizes,
+                        np.array(received, dtype=np.int64))
 
 
 def _read_messages(path: Path, topic: str) -> _Messages:
-    from rosbags.rosbag2 import Reader, ReaderError
-
-    from agvdyn.io._cdr import decode_joint_states
-
-    typestore = _joint_state_typestore()
-
-    def deserialize(raw: bytes):
-        return typestore.deserialize_cdr(raw, JOINT_STATE)
-
-    stamps, received, names, position, effort = [], [], [], [], []
-    pending: list[bytes] = []
-
-    def decode() -> None:  # a batch at a time: the raw bytes of a long bag are never all held
-        batch = decode_joint_states(pending, deserialize)
-        stamps.append(batch.stamps)
-        names.extend(batch.names)
-        position.extend(batch.position)
-        effort.extend(batch.effort)
-        pending.clear()
-
-    try:
-        with Reader(path) as reader:
-            conns = [c for c in reader.connections if c.topic == topic]
-            if not conns:
-                found = {c.topic: c.msgtype for c in reader.connections}
-                raise LogError(f"{path}: no topic {topic!r} in the bag; topics found: {found}; set 'topic' in the mapping")
-            wrong = [c.msgtype for c in conns if c.msgtype != JOINT_STATE]
-            if wrong:
-                raise LogError(f"{path}: topic {topic!r} has message type {wrong[0]}: expected {JOINT_STATE}")
-            for _conn, timestamp, raw in reader.messages(connections=conns):
-                received.append(timestamp)
-                pending.append(raw)
-                if len(pending) >= _DECODE_BATCH:
-                    decode()
-            if pending:
-                decode()
-    except (ReaderError, FileNotFoundError) as exc:
-        raise LogError(f"{path}: cannot be read as a ROS 2 bag (sqlite3 or MCAP): {exc}") from exc
-    if not received:
+    """The JointState messages of ``topic``: read in bulk by :mod:`agvdyn.io._bag_storage` (rosbags' Reader for
+    the bags it leaves), decoded per layout by :mod:`agvdyn.io._cdr` in batches of :data:`_DECODE_BATCH`."""
+    raw = read_topic(path, topic)
+    if raw is None:
+        raw = _read_raw_rosbags(path, topic)
+    else:
+        _check_topic(path, topic, raw.connections, [t for name, t in raw.connections if name == topic])
+    if not raw.received.size:
         raise LogError(f"{path}: topic {topic!r} has no messages")
-    return _Messages(np.concatenate(stamps), np.array(received, dtype=np.int64), names, position, effort)
+    deserialize = _rosbags_deserializer()
+    batches = [decode_joint_state_table(raw.data, raw.offsets[k:k + _DECODE_BATCH], raw.sizes[k:k + _DECODE_BATCH],
+                                        deserialize) for k in range(0, raw.received.size, _DECODE_BATCH)]
+    return _Messages(np.concatenate([b.stamps for b in batches]), raw.received, _joined_layouts(batches))
+
+
+def _joined_layouts(batches) -> dict[tuple[str, ...], JointRows]:
+    """The layouts of decoded batches (each numbering its messages from 0) as one table in bag order."""
+    if len(batches) == 1:
+        return batches[0].layouts
+    parts: dict[tuple[str, ...], list[JointRows]] = {}
+    start = 0
+    for batch in batches:
+        for names, rows in batch.layouts.items():
+            parts.setdefault(names, []).append(JointRows(rows.rows + start, rows.position, rows.effort))
+        start += batch.stamps.size
+    return {names: JointRows(*(np.concatenate([getattr(r, f) for r in rs]) for f in ("rows", "position", "effort")))
+            for names, rs in parts.items()}
 
 
 #: Messages decoded together (:mod:`agvdyn.io._cdr`): about 30 MB of raw JointState bytes.
@@ -134,36 +167,30 @@ class _JointTable:
     """Values of one JointState field per joint, vectorised over the messages of each name layout."""
 
     def __init__(self, msgs: _Messages) -> None:
-        self.msgs = msgs
-        layouts: dict[tuple[str, ...], list[int]] = {}
-        for k, names in enumerate(msgs.names):
-            layouts.setdefault(names, []).append(k)
-        self.layouts = {names: np.array(idx, dtype=np.int64) for names, idx in layouts.items()}
-        self._stacked: dict[tuple[tuple[str, ...], str], np.ndarray] = {}
-
-    def _matrix(self, names: tuple[str, ...], field: str) -> np.ndarray:
-        key = (names, field)
-        if key not in self._stacked:
-            arrays = self.msgs.position if field == "position" else self.msgs.effort
-            width = len(names)
-            nan_row = np.full(width, np.nan)
-            # An empty field (allowed by JointState) counts as missing values.
-            rows = [a if len(a) == width else nan_row for a in (arrays[k] for k in self.layouts[names])]
-            self._stacked[key] = np.stack(rows) if rows else np.empty((0, width))
-        return self._stacked[key]
+        self.layouts = msgs.layouts
 
     def series(self, joint: str, field: str) -> tuple[np.ndarray, np.ndarray]:
         """Message indices (bag order) and values of ``field`` of ``joint`` in the messages naming it."""
         idx, vals = [], []
-        for names, ks in self.layouts.items():
+        for names, rows in self.layouts.items():
             if joint in names:
-                idx.append(ks)
-                vals.append(self._matrix(names, field)[:, names.index(joint)])
+                idx.append(rows.rows)
+                vals.append((rows.position if field == "position" else rows.effort)[:, names.index(joint)])
         if not idx:
             return np.array([], dtype=np.int64), np.array([])
+        if len(idx) == 1:
+            return idx[0], vals[0]
         idx_all, vals_all = np.concatenate(idx), np.concatenate(vals)
         order = np.argsort(idx_all, kind="stable")
         return idx_all[order], vals_all[order]
+
+
+def _union(stamps: list[np.ndarray]) -> np.ndarray:
+    """Sorted union of strictly increasing stamp arrays (``np.unique`` of their concatenation); the
+    array itself when they are all equal (a joint's position and effort from the same messages)."""
+    if all(s.size == stamps[0].size and np.array_equal(s, stamps[0]) for s in stamps[1:]):
+        return stamps[0]
+    return np.unique(np.concatenate(stamps))
 
 
 def read_bag(
@@ -227,7 +254,7 @@ def read_bag(
                            "while others have stamps: expected stamps in every message (or use stamps: receive in the mapping)")
         times_ns, time_kind = msgs.stamps, "header stamp"
 
-    seen = sorted({n for names in set(msgs.names) for n in names})
+    seen = sorted({n for names in msgs.layouts for n in names})
     table = _JointTable(msgs)
     raw_series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for sig in mapping.signals:
@@ -258,7 +285,7 @@ def read_bag(
     counted: list[str] = []  # joints whose interval comes from counting their stamps
     fits: dict[bytes, object] = {}  # joints published in the same messages share their stamps: fitted once
     for joint in mapping.sources:
-        stamps = np.unique(np.concatenate([raw_series[s.quantity][0] for s in mapping.signals if s.source == joint]))
+        stamps = _union([raw_series[s.quantity][0] for s in mapping.signals if s.source == joint])
         if stamps.size > 1 and stamps.tobytes() not in fits:
             fits[stamps.tobytes()] = fit_stamps(stamps, source=f"{path}: joint {joint!r}")
         fit = fits[stamps.tobytes()] if stamps.size > 1 else None
