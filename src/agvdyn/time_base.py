@@ -190,8 +190,8 @@ def _lattice_period(x: np.ndarray, T0: float) -> float | None:
         r = z * (np.conj(s) / abs(s))  # exp(i (theta - phi))
         c, sn = r.real, r.imag
         w = 2 * np.pi * xc
-        g_f = -(w @ sn)
-        h_ff, h_fp, h_pp = -(w * w) @ c, w @ c, -c.sum()
+        g_f = -np.einsum("i,i->", w, sn)  # not BLAS: a threaded ddot spins for ms on a busy host (10x here)
+        h_ff, h_fp, h_pp = -np.einsum("i,i,i->", w, w, c), np.einsum("i,i->", w, c), -c.sum()
         det = h_ff * h_pp - h_fp * h_fp
         if not (h_pp < 0 and det > 0):
             break

@@ -8,6 +8,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 import yaml
+from agvdyn.io.sidecar import _LOADER
 from agvdyn.io.log import BETA_COLUMNS, SEGMENTS, TORQUE_COLUMNS
 from agvdyn.io.mapping import (
     ANGLE_UNITS,
@@ -209,7 +210,7 @@ def read_mapping(path: str | os.PathLike) -> LogMapping:
     except OSError as exc:
         raise MappingError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_LOADER)  # libyaml's safe loader: ~0.3 ms against ~5 ms
     except yaml.YAMLError as exc:
         raise MappingError(f"{path}: not valid YAML: {exc}") from exc
     return mapping_from_dict(data, path)
