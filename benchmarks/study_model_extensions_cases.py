@@ -131,6 +131,9 @@ def checks(rec: dict[str, Any], ref: dict[str, Any] | None = None) -> dict[str, 
         out[f"auto chooses {wanted}"] = "error" not in auto and auto["chosen"] == wanted
         if "chosen_all_rows" in auto:
             out[f"auto on all rows chooses {wanted}"] = auto["chosen_all_rows"] == wanted
+        if case.delay and "delay_s" in auto:  # auto kept a delay: within one sample of the truth
+            error = abs(auto["delay_s"] - rec["true_delay_s"])
+            out["auto's delay within 1 sample"] = error <= DELAY_TOL_SAMPLES * rec["sample_time"]
         if case.extension.is_paper:
             out["auto: parameters unchanged"] = "error" not in auto and auto["paper_change"] is not None and auto["paper_change"] < 1e-12
     return out

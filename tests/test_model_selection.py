@@ -4,6 +4,7 @@ comparison (BIC on the effective sample, held-out NRMSE) and ``auto``'s choice, 
 --model / --compare-models``."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -271,6 +272,86 @@ def test_auto_compares_a_delay_with_the_paper_model_on_the_chassis_rows():
         chosen_model(scores, rows="some")
 
 
+def _stribeck_fit(support: dict, velocities=(0.0334, 0.0079, 0.0544), com_offset: bool = False):
+    """What selection reads of a Stribeck fit: its resolved model, the rows in each group's Stribeck range,
+    the paper's 10 free parameters and 4 offsets."""
+    from types import SimpleNamespace
+
+    model = ModelSpec(friction="stribeck", stribeck_velocities=velocities, com_offset=com_offset)
+    return SimpleNamespace(model=model, rows=SimpleNamespace(stribeck_support=support),
+                           std=dict.fromkeys(("C_l", "d_vl", "d_cl", "C_r", "d_vr", "d_cr", "m_ch", "C_ch", "d_vw",
+                                              "d_cw"), 0.01), offsets_std=dict.fromkeys("abcd", 0.01))
+
+
+def test_bic_counts_every_fitted_column_and_searched_value():
+    """k of a Stribeck fit: the three levels (also those reported at the paper's law for want of rows in their
+    Stribeck range: their columns were fitted) and the three searched velocities; x_c, held at 0 by design,
+    not; the delay's search one."""
+    from agvdyn.identification.selection_rows import bic_parameter_count, determined_breakaway
+
+    wheels_only = _stribeck_fit({"l": 0, "r": 0, "w": 12630})
+    assert determined_breakaway(wheels_only) == ("w",)
+    assert bic_parameter_count(ModelSpec(friction="stribeck"), wheels_only) == 14 + 6  # the rule before: 14 + 4
+    assert bic_parameter_count(wheels_only.model, wheels_only) == 14 + 3  # velocities given: not searched
+    every = _stribeck_fit({"l": 0, "r": 0, "w": 12630}, com_offset=True)
+    searched_all = ModelSpec(friction="stribeck", delay="auto", com_offset=True)
+    assert bic_parameter_count(searched_all, every) == 14 + 3 + 3 + 1 + 1  # levels, velocities, y_c, delay
+    assert determined_breakaway(_stribeck_fit({"l": 900, "r": 0, "w": 12630})) == ("l", "w")
+    assert determined_breakaway(None) is None
+
+
+def test_auto_compares_breakaway_on_the_rows_of_its_determined_groups():
+    """Measured on our plant's effect-free log (seed 3, tau 50): the Stribeck fit lowers J/tau by 19.5 on alpha_l
+    and 31.3 on alpha_r -- the steering groups, whose levels it reports as undetermined (no rows in their
+    Stribeck range) -- and raises it by 0.1 on the chassis rows. On all rows that passed (old rule: k + 4,
+    BIC -24); compared on the rows of the group it determined (the wheels: chassis rows) it does not; a Stribeck
+    fit without any determined group is never kept; with the steering groups determined their rows count."""
+    from agvdyn.identification.selection import versus
+
+    paper, stribeck, delay, com, every = candidate_models()
+    tau = 50.0
+    rows = {"alpha_l": 9445, "alpha_r": 7490, "x_ch": 11565, "gamma_ch": 11424}
+    gain = {"alpha_l": -19.5, "alpha_r": -31.3, "x_ch": 0.2, "gamma_ch": -0.1}  # J/tau per group
+    base = {g: (float(n), n) for g, n in rows.items()}
+    ss = {g: (n * math.exp(gain[g] * tau / n), n) for g, n in rows.items()}
+    held = {"steer_left:alpha_l": (1.0, 100.0), "steer_right:alpha_r": (1.0, 100.0), "straight:x_ch": (4.0, 100.0),
+            "rotation:gamma_ch": (4.0, 100.0)}
+    held_s = {**held, "steer_left:alpha_l": (0.9, 100.0), "steer_right:alpha_r": (0.8, 100.0),
+              "straight:x_ch": (3.99, 100.0)}
+
+    def scores(k_stribeck, support):
+        s = dataclasses.replace(_pieces(stribeck, ss, held_s, k_stribeck, tau), identification=_stribeck_fit(support))
+        return [_pieces(paper, base, held, 14, tau), s, _pieces(delay, base, held, 15, tau, reference=None)]
+
+    old = scores(18, {"l": 0, "r": 0, "w": 12630})
+    assert chosen_model(old, rows="all")[0] == 1  # the rule before: kept on the steering rows' gain
+    new = scores(20, {"l": 0, "r": 0, "w": 12630})
+    v = versus(new[1], new[0])
+    assert v["rows"] == ["x_ch", "gamma_ch"] and not v["better"] and chosen_model(new)[0] == 0
+    assert v["bic"] - v["bic_other"] == pytest.approx(0.1 + 6 * math.log((11565 + 11424) / tau), rel=1e-6)
+    none = scores(20, {"l": 0, "r": 0, "w": 0})
+    assert versus(none[1], none[0])["rows"] == [] and chosen_model(none)[0] == 0
+    steering = scores(20, {"l": 900, "r": 900, "w": 0})
+    assert versus(steering[1], steering[0])["rows"] == ["alpha_l", "alpha_r"] and chosen_model(steering)[0] == 1
+
+
+def test_the_velocity_of_a_level_at_the_papers_law_does_not_exclude_the_model():
+    """A steering group without rows in its Stribeck range: its level is reported at the paper's law and its
+    searched w_s has a flat profile (std inf) -- neither is undetermined for want of data (before, w_sl excluded
+    the Stribeck model on every breakaway log); an unbounded w_sw of the determined wheels is."""
+    from agvdyn.identification.selection import _undetermined
+    from agvdyn.platform import PAPER_PARAMETERS
+
+    fit = _stribeck_fit({"l": 0, "r": 0, "w": 12630})
+    fit.parameters, fit.delay_std_s = PAPER_PARAMETERS, math.inf
+    fit.extra = {"d_sl": PAPER_PARAMETERS.d_cl, "d_sr": PAPER_PARAMETERS.d_cr, "d_sw": 5.0,
+                 "w_sl": 0.01, "w_sr": 0.01, "w_sw": 0.05}
+    fit.extra_std = {"d_sl": math.inf, "d_sr": math.inf, "d_sw": 0.3, "w_sl": math.inf, "w_sr": math.inf, "w_sw": 0.004}
+    assert _undetermined(ModelSpec(friction="stribeck"), fit, 0.5) == ()
+    fit.extra_std["w_sw"] = math.inf
+    assert _undetermined(ModelSpec(friction="stribeck"), fit, 0.5) == ("w_sw",)
+
+
 # --- held-out error -------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -429,6 +510,10 @@ def test_auto_keeps_the_paper_model_on_an_effect_free_log(effect_free_selection)
                           "chosen"}
         assert e["error"] is not None or (e["bic"] is not None and 0 < e["nrmse_holdout"] < 1)
     assert selection.correlation_steps > 1 and selection.n_effective < plain.n_rows
+    paper, stribeck = selection.scores[:2]  # three levels and three searched velocities, all fitted: all counted
+    assert stribeck.error is None and stribeck.k == paper.k + 6
+    # the steering groups' levels lack rows in their Stribeck range: compared on the wheels' evidence, the chassis
+    assert stribeck.identification.rows.stribeck_support["l"] < 500 and stribeck.versus_paper["rows"] == ["x_ch", "gamma_ch"]
     com = selection.scores[3]  # straight and rotation apart: y_c is not excited (std inf); x_c is held by design
     assert "y_c" in com.undetermined and "x_c" not in com.undetermined and not com.usable
 
@@ -541,6 +626,7 @@ def test_comparison_note_names_the_rows_and_both_scores():
     from agvdyn.identification.selection_rows import comparison_note
 
     assert comparison_note(None) == "" and comparison_note({"rows": "all"}) == ""
+    assert "no rows are evidence of its breakaway levels" in comparison_note({"rows": []})
     note = comparison_note({"rows": ["straight:x_ch", "rotation:gamma_ch"], "bic": 12.25, "bic_other": 20.0,
                             "nrmse_holdout": 0.0058, "nrmse_holdout_other": float("nan")})
     assert note == ("against the paper's model on the straight:x_ch, rotation:gamma_ch rows: BIC 12.2 vs 20.0, "

@@ -32,6 +32,8 @@ evidence. The scores above sum all coordinates (the table's figures); where two 
 delay alone, both are scored on the delay's evidence rows, those its search uses (the chassis rows,
 :func:`.model_search.delay_evidence`): the steering rows carry the steering joints' stick-slip, which the
 tanh law lacks and which looks like a torque lead, and would vote any real delay down on our plant.
+The Stribeck law likewise on the rows of the joint groups whose breakaway level the fit determined
+(the wheels': chassis rows; none determined: never kept).
 
 ``auto`` (:func:`chosen_model`): an extension passes when it lowers both the BIC and the held-out
 error of the paper's model on their comparison rows and none of its parameters is undetermined (std
@@ -65,8 +67,9 @@ from agvdyn.identification.model_search import (
 )
 from agvdyn.identification.plausibility import ImplausibleError, implausible_parameters
 from agvdyn.identification.regression import UnidentifiableError
-from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, comparison_rows,
-                                                  holdout_nrmse, holdout_of_sums, holdout_parts)
+from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, bic_parameter_count,
+                                                  comparison_rows, determined_breakaway, holdout_nrmse,
+                                                  holdout_of_sums, holdout_parts)
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
 from agvdyn.io import Log, LogFile
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, DELAY_RANGE, STRIBECK_NAMES, STRIBECK_RANGE, ModelSpec
@@ -150,9 +153,11 @@ class ModelScore:
 
     def on_rows(self, groups: Sequence[str] | None) -> tuple[float, float]:
         """``(BIC, held-out NRMSE)`` on the coordinate groups ``groups`` (:mod:`.selection_rows`); all rows
-        (``bic``, ``nrmse_holdout``) when None or without the per row class sums."""
+        (``bic``, ``nrmse_holdout``) when None or without the per row class sums; NaN on no rows (``()``)."""
         if groups is None or not self.residual_ss or not self.holdout_sums:
             return self.bic, self.nrmse_holdout
+        if not groups:
+            return math.nan, math.nan
         return (bic_on_rows(self.residual_ss, self.k, self.correlation_steps, self.reference_rows, groups),
                 holdout_of_sums(self.holdout_sums, groups))
 
@@ -181,7 +186,9 @@ def versus(a: ModelScore, b: ModelScore, rows: str = "evidence") -> dict[str, An
     errors on them, and whether ``a`` lowers both (and is usable)."""
     if rows not in ROWS_CHOICES:
         raise ValueError(f"rows={rows!r}: expected one of {list(ROWS_CHOICES)}")
-    groups = comparison_rows(a.model, b.model, b.residual_ss or a.residual_ss) if rows == "evidence" else None
+    friction = determined_breakaway((a if a.model.stribeck else b).identification)  # its evidence rows
+    ss = b.residual_ss or a.residual_ss
+    groups = comparison_rows(a.model, b.model, ss, friction) if rows == "evidence" else None
     (bic, holdout), (bic_b, holdout_b) = a.on_rows(groups), b.on_rows(groups)
     return {"rows": "all" if groups is None else list(groups), "bic": bic, "bic_other": bic_b,
             "nrmse_holdout": holdout, "nrmse_holdout_other": holdout_b,
@@ -270,13 +277,14 @@ def _refit(model: ModelSpec, geometry: Any, fixed: Mapping[str, float], settings
 
 def _undetermined(model: ModelSpec, ident: Any, limit: float) -> tuple[str, ...]:
     """What the data leave undetermined in a fit of ``model``: added parameters without a finite std
-    (the delay's: ``delay_std_s``; not those held by design, :func:`held_parameters`), breakaway levels
-    and paper parameters whose std exceeds ``limit`` of their value (the extension's columns nearly
-    collinear with theirs)."""
+    (the delay's: ``delay_std_s``; not those held by design, :func:`held_parameters`, nor their w_s),
+    breakaway levels and paper parameters whose std exceeds ``limit`` of their value (the extension's
+    columns nearly collinear with theirs)."""
     def finite(x: float | None) -> bool:
         return x is not None and math.isfinite(x)
 
     held = held_parameters(model, ident)
+    held += tuple(f"w_s{n[-1]}" for n in held if n in BREAKAWAY_NAMES)  # the velocity of a level at the paper's law
     stds = {**{n: v for n, v in ident.extra_std.items() if n not in held}, DELAY: ident.delay_std_s}
     out = [n for n in added_parameters(model) if n not in held and not finite(stds.get(n))]
     values = {**{n: getattr(ident.parameters, n) for n in ident.std}, **ident.extra}
@@ -331,7 +339,7 @@ class _Scoring:
         self.found[model] = ({n: v for n, v in searched_values(ident.model).items() if n in added_parameters(model)},
                              fit)
         error = _rejected(ident, settings.fit.plausibility)
-        k = len(ident.std) + len(ident.offsets_std) + len(added_parameters(model)) - len(held_parameters(model, ident))
+        k = bic_parameter_count(model, ident)
         bic, j, _ = information_bic(ident.residual_ss, k, self.steps, self.reference)
         rss, rows = (sum(v) for v in zip(*ident.residual_ss.values()))
         refit = _refit(ident.model, self.geometry, self.options["fixed"], settings, self.options["estimator"])

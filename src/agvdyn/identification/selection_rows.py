@@ -11,6 +11,14 @@ extensions in which they differ (all rows as soon as one of those is not the del
 BIC and held-out error as on all rows: ``BIC_G = J_G / tau + k log(N_G / tau)`` (J, N over the coordinate
 groups G; tau and the reference rows the paper model's) and the held-out NRMSE averaged over the
 ``segment:coordinate`` keys of G.
+
+The breakaway levels likewise (:data:`BREAKAWAY_EVIDENCE`): a steering group's on its own coordinate's rows,
+the wheels' on the chassis rows; a group whose level the fit could not determine (no rows in its
+Stribeck range, :func:`.model_fit.unsupported_breakaway`) gives none. On our plant's effect-free logs
+the Stribeck model's gain is all on the steering rows (seed 3: J/tau -19.5 alpha_l, -31.3 alpha_r,
++0.1 chassis), made by the steering groups' columns whose levels it reports as undetermined (their
+columns fit the filter's tails of the steering joints' stick phases). The BIC counts every fitted
+column and searched value (:func:`bic_parameter_count`), those levels included.
 """
 from __future__ import annotations
 
@@ -21,11 +29,14 @@ from typing import Any
 import numpy as np
 
 from agvdyn.identification.equations import EquationBlock
-from agvdyn.identification.model_search import concentrated_likelihood, delay_evidence
-from agvdyn.model_spec import ModelSpec
+from agvdyn.identification.model_fit import UNOBSERVABLE, unsupported_breakaway
+from agvdyn.identification.model_search import DELAY, concentrated_likelihood, delay_evidence
+from agvdyn.identification.settings import CHASSIS_COORDINATES
+from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
 
 __all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows",
-           "bic_on_rows", "ROWS_CHOICES", "HOLDOUT_PARTS"]
+           "bic_on_rows", "bic_parameter_count", "breakaway_evidence", "determined_breakaway", "ROWS_CHOICES",
+           "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE"]
 
 #: Parts of each segment in the held-out error's cross-validation.
 HOLDOUT_PARTS = 4
@@ -33,6 +44,11 @@ HOLDOUT_PARTS = 4
 #: How ``auto`` compares two models: on the evidence rows of their difference, or on all rows (the
 #: rule before issue 30's delay fix; kept for the study's comparison).
 ROWS_CHOICES = ("evidence", "all")
+
+#: The coordinate groups whose rows are the evidence of each friction group's breakaway level: a steering
+#: joint's own coordinate (``alpha_v``: both follow it in car-like turns), the wheels' the chassis
+#: coordinates (the steering rows carry the steering joints' stick-slip, as for the delay).
+BREAKAWAY_EVIDENCE = {"l": ("alpha_l", "alpha_v"), "r": ("alpha_r", "alpha_v"), "w": CHASSIS_COORDINATES}
 
 #: A predictor of a block's model torques (n, n_k) made by a refit on blocks.
 Refit = Callable[[Sequence[EquationBlock]], Callable[[EquationBlock], np.ndarray]]
@@ -68,14 +84,58 @@ def holdout_of_sums(sums: Mapping[str, tuple[float, float]], groups: Sequence[st
     return float(np.mean(scores)) if scores else math.nan
 
 
-def comparison_rows(a: ModelSpec, b: ModelSpec, residual_ss: Mapping[str, tuple[float, int]]) -> tuple[str, ...] | None:
-    """The coordinate groups (of ``residual_ss``) models ``a`` and ``b`` are compared on: the delay's
-    evidence rows (:func:`.model_search.delay_evidence`) when the delay is all they differ in, else None
-    (all rows)."""
+def comparison_rows(a: ModelSpec, b: ModelSpec, residual_ss: Mapping[str, tuple[float, int]],
+                    breakaway_groups: Sequence[str] | None = None) -> tuple[str, ...] | None:
+    """The coordinate groups (of ``residual_ss``) models ``a`` and ``b`` are compared on: the evidence
+    rows of the extensions they differ in -- the delay's (:func:`.model_search.delay_evidence`), the
+    breakaway levels' of the friction groups ``breakaway_groups`` (:func:`breakaway_evidence`; None:
+    all three) --; None (all rows) when they differ in the centre of mass, or when a difference of the
+    friction law has evidence on every row. ``()``: a friction law without evidence (no group determined)."""
     differ = set(a.extensions) ^ set(b.extensions)
-    if differ != {"delay"}:
+    if differ == {"delay"}:
+        return tuple(delay_evidence(residual_ss))
+    if not differ or "com_offset" in differ:
         return None
-    return tuple(delay_evidence(residual_ss))
+    rows = set(breakaway_evidence(residual_ss, "lrw" if breakaway_groups is None else breakaway_groups))
+    if "delay" in differ and rows:
+        rows |= set(delay_evidence(residual_ss))
+    return None if rows >= set(residual_ss) else tuple(g for g in residual_ss if g in rows)
+
+
+def breakaway_evidence(residual_ss: Mapping[str, tuple[float, int]], groups: Sequence[str]
+                       ) -> Mapping[str, tuple[float, int]]:
+    """The coordinate groups of ``residual_ss`` that are the evidence of the breakaway levels of the friction
+    ``groups`` (``l``, ``r``, ``w``; :data:`BREAKAWAY_EVIDENCE`); empty without groups."""
+    unknown = [g for g in groups if g not in BREAKAWAY_EVIDENCE]
+    if unknown:
+        raise ValueError(f"breakaway_groups={list(groups)}: expected friction groups among {list(BREAKAWAY_EVIDENCE)}")
+    wanted = {c for g in groups for c in BREAKAWAY_EVIDENCE[g]}
+    return {c: v for c, v in residual_ss.items() if c in wanted}
+
+
+def determined_breakaway(ident: Any) -> tuple[str, ...] | None:
+    """The friction groups (``l``, ``r``, ``w``) whose breakaway level a Stribeck fit ``ident`` determined: those
+    with rows in their Stribeck range (not :func:`.model_fit.unsupported_breakaway`); None without a fit or its
+    rows' account (unknown), ``()`` for a model without the Stribeck law."""
+    model = getattr(ident, "model", None)
+    support = getattr(getattr(ident, "rows", None), "stribeck_support", None)
+    if model is None or support is None:
+        return None
+    if not model.stribeck:
+        return ()
+    unsupported = unsupported_breakaway(model, support)
+    return tuple(g for g in "lrw" if f"d_s{g}" not in unsupported)
+
+
+def bic_parameter_count(model: ModelSpec, ident: Any) -> int:
+    """``k`` of the BIC of a fit ``ident`` of ``model``: every column the regression estimated (the paper's free
+    parameters, the torque offsets, the model's columns but those held at 0 by design, :data:`.model_fit.UNOBSERVABLE`)
+    and every searched value (the delay, the Stribeck velocities). A breakaway level reported at the paper's
+    law for want of rows in its Stribeck range was still fitted and counts, as does its searched velocity."""
+    columns = [n for n in ident.model.linear_names if n not in UNOBSERVABLE]
+    searched = ((DELAY,) if model.delay == "auto" else ()) + (
+        STRIBECK_NAMES if model.stribeck and model.stribeck_velocities is None else ())
+    return len(ident.std) + len(ident.offsets_std) + len(columns) + len(searched)
 
 
 def bic_on_rows(residual_ss: Mapping[str, tuple[float, int]], k: int, correlation_steps: float,
@@ -137,6 +197,8 @@ def comparison_note(versus: Mapping[str, Any] | None) -> str:
     all rows or without one): its rows, both BICs and held-out errors (``ModelScore.versus_paper``)."""
     if not versus or versus.get("rows") == "all":
         return ""
+    if not versus["rows"]:
+        return "not compared with the paper's model: no rows are evidence of its breakaway levels (none determined)"
 
     def num(x: Any, fmt: str) -> str:
         return "-" if x is None or not math.isfinite(x) else format(x, fmt)
