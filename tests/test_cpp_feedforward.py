@@ -493,7 +493,7 @@ def test_cpp_tracker_meets_the_vectors(tracker_vectors):
         [(e["log"], e["sample"], e["start"], e["parameter"], e["sign"]) for e in data["events"]]
     for e, ref in zip(events, data["events"]):
         worst = max(worst, _relative(e[5:], [ref["before"], ref["before_var"], ref["after"], ref["after_var"]]))
-    state = [np.zeros(8), np.zeros((8, 8)), np.zeros(4), np.zeros(12), np.zeros((2, 2)), np.zeros((2, 2, 8, 8)),
+    state = [np.zeros(8), np.zeros((8, 8)), np.zeros(4), np.zeros(20), np.zeros((2, 2)), np.zeros((2, 2, 8, 8)),
              np.zeros((2, 2, 8)), np.zeros((2, 2))]
     tracker.store_state(*state)
     for key, value in zip(("theta", "P", "R", "n_rows", "g", "start"), state[:5] + state[7:]):

@@ -187,8 +187,8 @@ ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<d
       {"rotation_correlation", &s.rotation_correlation}, {"threshold", &s.threshold},
       {"random_walk", &s.random_walk}, {"bias_walk", &s.bias_walk}, {"reset_std", &s.reset_std},
       {"noise_time", &s.noise_time}, {"initial_std", &s.initial_std}, {"bias_std", &s.bias_std},
-      {"noise", &s.noise}, {"offset_change", &s.offset_change}, {"offset_std", &s.offset_std},
-      {"offset_walk", &s.offset_walk}};
+      {"twin_bias_std", &s.twin_bias_std}, {"noise", &s.noise}, {"offset_change", &s.offset_change},
+      {"offset_std", &s.offset_std}, {"offset_walk", &s.offset_walk}};
   for (const auto& [key, value] : values) {
     if (key == "warm_rows") {
       s.warm_rows = static_cast<int>(value);
@@ -210,7 +210,7 @@ ff::PayloadTracker make_tracker(std::tuple<double, double> nominal, std::tuple<d
 }
 
 // The state as the arrays of agvdyn.online.tracker.TrackerState: theta (ns), P (ns, ns), R (4),
-// n_rows (12), g (2, 2), Iw (2, 2, ns, ns), bw (2, 2, ns), start (2, 2); CUSUM (i, s) is index 2 i + s;
+// n_rows (20), g (2, 2), Iw (2, 2, ns, ns), bw (2, 2, ns), start (2, 2); CUSUM (i, s) is index 2 i + s;
 // ns = 8, 9 with com_offset (tracker.states()).
 void check_size(const char* name, std::size_t size, std::size_t expected) {
   if (size != expected) {
@@ -223,7 +223,7 @@ void check_state_sizes(std::size_t ns, Flat theta, Flat P, Flat R, Flat n_rows, 
   check_size("theta", theta.size(), ns);
   check_size("P", P.size(), ns * ns);
   check_size("R", R.size(), ff::kNoiseClasses);
-  check_size("n_rows", n_rows.size(), ff::kRowKinds + ff::kNoiseClasses);
+  check_size("n_rows", n_rows.size(), ff::kTrackerCounts);
   check_size("g", g.size(), 4);
   check_size("Iw", Iw.size(), 4 * ns * ns);
   check_size("bw", bw.size(), 4 * ns);
@@ -239,7 +239,7 @@ void load_state_of(ff::PayloadTracker& tracker, ff::TrackerStateOf<N> st, Flat t
     for (int q = 0; q < N; ++q) st.P(p, q) = P.data()[N * p + q];
   }
   for (int k = 0; k < ff::kNoiseClasses; ++k) st.R[k] = R.data()[k];
-  for (int k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) st.n_rows[k] = n_rows.data()[k];
+  for (int k = 0; k < ff::kTrackerCounts; ++k) st.n_rows[k] = n_rows.data()[k];
   for (int c = 0; c < 4; ++c) {
     st.g[static_cast<std::size_t>(c)] = g.data()[c];
     st.start[static_cast<std::size_t>(c)] = static_cast<std::int64_t>(start.data()[c]);
@@ -269,7 +269,7 @@ void store_state_of(const ff::TrackerStateOf<N>& st, Flat theta, Flat P, Flat R,
     for (int q = 0; q < N; ++q) P.data()[N * p + q] = st.P(p, q);
   }
   for (int k = 0; k < ff::kNoiseClasses; ++k) R.data()[k] = st.R[k];
-  for (int k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) n_rows.data()[k] = st.n_rows[k];
+  for (int k = 0; k < ff::kTrackerCounts; ++k) n_rows.data()[k] = st.n_rows[k];
   for (int c = 0; c < 4; ++c) {
     g.data()[c] = st.g[static_cast<std::size_t>(c)];
     start.data()[c] = static_cast<double>(st.start[static_cast<std::size_t>(c)]);

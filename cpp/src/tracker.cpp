@@ -19,6 +19,7 @@ constexpr int OFFSET = kOffsetState;
 constexpr double kRestart = 1.0;
 // A row bias learnt from fewer than kYoungWarmups x warm_rows rows of its kinds is young (_kernels.YOUNG_WARMUPS).
 constexpr int kCarLike = 3;  // noise class of the car-like x_ch rows (_kernels.CAR_LIKE)
+constexpr int kTested = kRowKinds + kNoiseClasses;  // n_rows: tested rows per kind from here (_kernels.TESTED)
 
 // The bias state and noise class of row kind c (1..8), as _kernels._update: the car-like x_ch rows (7, 8) have
 // the straight ones' biases and a noise class of their own.
@@ -65,6 +66,32 @@ void joseph(MatrixN<N>& P, const double* K, const double* f, double r_eff) noexc
   }
 }
 
+// bias j treated as unknown: variance var, uncorrelated, value kept (_kernels._unknown_bias)
+template <int N>
+void unknown_bias(MatrixN<N>& P, int j, double var) noexcept {
+  for (int q = 0; q < N; ++q) {
+    P(j, q) = 0.0;
+    P(q, j) = 0.0;
+  }
+  P(j, j) = var;
+}
+
+// _kernels._twin_bias: at the first row of kind c (1..6) whose twin (same coordinate, other sign) is warm, its
+// bias starts at the twin's with the twin's variance + twin_var; true when the kind counts as warm through its twin.
+template <int N>
+bool twin_bias(VectorN<N>& theta, MatrixN<N>& P, const Eigen::Matrix<double, kTrackerCounts, 1>& n_rows, int c, int j,
+               double warm, double twin_var) noexcept {
+  if (c > 6) return false;
+  const int twin = c % 2 == 1 ? c + 1 : c - 1;
+  if (n_rows[twin - 1] < warm) return false;
+  if (n_rows[c - 1] == 0.0 && (c > 2 || n_rows[c + 5] == 0.0)) {  // the bias's first row (x_ch: car-like ones too)
+    const double var = P(1 + twin, 1 + twin) + twin_var;
+    theta[j] = theta[1 + twin];
+    unknown_bias<N>(P, j, var);
+  }
+  return true;
+}
+
 // out = A^-1 of a symmetric positive definite matrix by Gauss-Jordan without pivoting (_kernels._inverse_spd).
 template <int N>
 void inverse_spd(const double (&A)[N][N], double (&out)[N][N]) noexcept {
@@ -100,7 +127,7 @@ void inverse_spd(const double (&A)[N][N], double (&out)[N][N]) noexcept {
 // the re-estimated states is the inverse of the normal matrix, decoupled from the rest.
 template <int N>
 void reset_payload(VectorN<N>& theta, MatrixN<N>& P, const MatrixN<N>& I, const VectorN<N>& b,
-                   const Eigen::Vector3d& reset_var, const Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1>& n_rows,
+                   const Eigen::Vector3d& reset_var, const Eigen::Matrix<double, kTrackerCounts, 1>& n_rows,
                    double young,
                    double bias_var) noexcept {
   bool sel[N];
@@ -109,6 +136,10 @@ void reset_payload(VectorN<N>& theta, MatrixN<N>& P, const MatrixN<N>& I, const 
   for (int j = 2; j < NS; ++j) {
     const double seen = n_rows[j - 2] + (j < 4 ? n_rows[j + 4] : 0.0);  // x_ch biases: straight and car-like rows
     sel[j] = I(j, j) > 0.0 && seen < young;
+    const double tested = n_rows[kTested + j - 2] + (j < 4 ? n_rows[kTested + j + 4] : 0.0);
+    if (!sel[j] && seen > 0.0 && tested < young / kYoungWarmups) {
+      unknown_bias<N>(P, j, bias_var);  // learnt from rows no CUSUM checked: it may hold the change
+    }
   }
   if constexpr (N > NS) sel[OFFSET] = true;
   double A[N][N] = {};
@@ -171,7 +202,8 @@ Status PayloadTracker::create(const Vector2& nominal, const Vector2& nominal_std
                               double dt, const TrackerSettings& s, PayloadTracker* tracker) noexcept {
   if (tracker == nullptr) return Status::invalid_model;
   for (double v : {s.change_size, s.gate, s.correlation, s.rotation_correlation, s.threshold, s.random_walk,
-                   s.bias_walk, s.reset_std, s.noise_time, s.initial_std, s.bias_std, s.noise, s.offset_change,
+                   s.bias_walk, s.reset_std, s.noise_time, s.initial_std, s.bias_std, s.twin_bias_std, s.noise,
+                   s.offset_change,
                    s.offset_std, s.offset_walk, dt}) {
     if (!positive(v)) return Status::invalid_model;
   }
@@ -198,6 +230,7 @@ Status PayloadTracker::create(const Vector2& nominal, const Vector2& nominal_std
   t.reset_var_[2] = prior_y * prior_y;
   t.q_b_ = s.bias_walk * s.bias_walk;
   t.bias_var_ = s.bias_std * s.bias_std;
+  t.twin_var_ = s.twin_bias_std * s.twin_bias_std;
   // TrackerState.initial
   if (s.com_offset) {
     t.initial_state(t.offset_state_, nominal, nominal_std);
@@ -323,6 +356,8 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   f[0] = phi_m;
   f[1] = phi_c;
   f[j] = 1.0;
+  const bool twin_warm =
+      twin_bias<N>(st.theta, st.P, st.n_rows, c, j, static_cast<double>(settings_.warm_rows), twin_var_);
   const double r_c = st.R[cls];
   const double r_eff = r_c * (cls == 2 ? settings_.rotation_correlation : settings_.correlation);
   const double noise = std::sqrt(r_c);
@@ -349,7 +384,7 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   double fPf = 0.0;
   for (int p = 0; p < N; ++p) fPf += f[p] * Pf[p];
   out.nis = r * r / (fPf + r_c);
-  const bool warm = st.n_rows[c - 1] >= static_cast<double>(settings_.warm_rows);
+  const bool warm = st.n_rows[c - 1] >= static_cast<double>(settings_.warm_rows) || twin_warm;
   // the noise class learns from the rows of its own test (car-like rows: also the C_ch-excited ones)
   const bool tested = warm && (excited[cls == 2 ? 1 : 0] || (cls == kCarLike && excited[1]));
   double gmax = 0.0;
@@ -383,12 +418,15 @@ void PayloadTracker::update_states(const TrackerRow& row, TrackerOutput& out) no
   }
   joseph<N>(st.P, K, f, r_eff);
   for (int p = 0; p < N; ++p) st.theta[p] += K[p] * r;
-  if (tested && gmax < 0.5 * settings_.threshold) {  // the noise: from rows the detector tests, frozen while a change builds up
+  // the noise: from rows the detector tests, frozen while a change builds up (any CUSUM above h / 2; rotation
+  // rows also while C_ch's window is open)
+  if (tested && gmax < 0.5 * settings_.threshold && !(cls == 2 && std::max(st.g[2], st.g[3]) > kRestart)) {
     const double lam = std::max(1.0 / (st.n_rows[kRowKinds + cls] + 1.0), dt_ / settings_.noise_time);
     st.R[cls] += lam * (r * r - st.R[cls]);
   }
   st.n_rows[kRowKinds + cls] += 1.0;
   st.n_rows[c - 1] += 1.0;
+  if (warm && excited[cls == 2 ? 1 : 0]) st.n_rows[kTested + c - 1] += 1.0;  // a row its CUSUM ran on
   detect<N>(out);
 }
 

@@ -84,6 +84,7 @@ TrackerVectors read_vectors(bool offset) {
     t.warm_rows = static_cast<int>(number(s.find("warm_rows")));
     t.initial_std = number(s.find("initial_std"));
     t.bias_std = number(s.find("bias_std"));
+    t.twin_bias_std = number(s.find("twin_bias_std"));
     t.noise = number(s.find("noise"));
     if (offset) {
       t.com_offset = true;
@@ -191,11 +192,11 @@ double check_final(const ff::TrackerStateOf<N>& st, const Node& f, double relati
     worst = std::max(worst, deviation(st.P(k / N, k % N), P[k], relative, "final P", k));
   }
   EXPECT_EQ(R.size(), static_cast<std::size_t>(ff::kNoiseClasses));
-  EXPECT_EQ(n_rows.size(), static_cast<std::size_t>(ff::kRowKinds + ff::kNoiseClasses));
+  EXPECT_EQ(n_rows.size(), static_cast<std::size_t>(ff::kTrackerCounts));
   for (std::size_t k = 0; k < ff::kNoiseClasses; ++k) {
     worst = std::max(worst, deviation(st.R[k], R.at(k), relative, "final R", k));
   }
-  for (std::size_t k = 0; k < ff::kRowKinds + ff::kNoiseClasses; ++k) EXPECT_EQ(st.n_rows[k], n_rows.at(k));
+  for (std::size_t k = 0; k < ff::kTrackerCounts; ++k) EXPECT_EQ(st.n_rows[k], n_rows.at(k));
   for (std::size_t k = 0; k < 4; ++k) {
     worst = std::max(worst, deviation(st.g[k], g.at(k), relative, "final g", k));
     EXPECT_EQ(st.start[k], static_cast<std::int64_t>(start.at(k)));

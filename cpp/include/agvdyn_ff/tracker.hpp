@@ -47,6 +47,8 @@ using TrackerMatrix = Eigen::Matrix<double, kTrackerStates, kTrackerStates>;
 /// Kinds of row (RowKind: 1..8) and noise classes (x_ch straight, y_ch, gamma_ch, x_ch car-like).
 constexpr int kRowKinds = 8;
 constexpr int kNoiseClasses = 4;
+/// Row counts of the state: per kind, per noise class, then the tested rows per kind (rows a CUSUM ran on).
+constexpr int kTrackerCounts = 2 * kRowKinds + kNoiseClasses;
 
 /// The whole state of a tracker of N states (agvdyn.online.tracker.TrackerState): CUSUM index c = 2 i + s
 /// for parameter i (0: m_ch, 1: C_ch) and sign s (0: +, 1: -). Each size has its own storage (the
@@ -58,8 +60,8 @@ struct TrackerStateOf {
   Vector theta = Vector::Zero();                 ///< m_ch, C_ch, biases of x_ch+, x_ch-, y_ch+, y_ch-, gamma_ch+, gamma_ch-[, m_ch y_c]
   Matrix P = Matrix::Zero();                     ///< covariance of theta
   Eigen::Vector4d R = Eigen::Vector4d::Zero();   ///< residual variance per noise class: x_ch straight, y_ch, gamma_ch, x_ch car-like
-  Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1> n_rows =
-      Eigen::Matrix<double, kRowKinds + kNoiseClasses, 1>::Zero();  ///< rows per kind (8), per noise class (4)
+  /// rows per kind (8), per noise class (4), tested per kind (8: rows a CUSUM ran on)
+  Eigen::Matrix<double, kTrackerCounts, 1> n_rows = Eigen::Matrix<double, kTrackerCounts, 1>::Zero();
   std::array<double, 4> g{};                     ///< CUSUMs
   std::array<std::int64_t, 4> start{};           ///< their window's first sample
   std::array<Matrix, 4> Iw{};                    ///< window information f f^T / R_eff
@@ -95,6 +97,7 @@ struct TrackerSettings {
   int warm_rows = 250;                 ///< rows of a kind before its CUSUMs run (and its rows teach the noise)
   double initial_std = 0.02;           ///< least initial std, x value
   double bias_std = 30.0;              ///< initial std of the row biases
+  double twin_bias_std = 5.0;          ///< a new kind's bias starts at its warm twin's (other sign), + this std
   double noise = 25.0;                 ///< initial residual variance R
   bool com_offset = false;             ///< track m_ch y_c (a ninth state) from the car-like rows
   double offset_change = 0.05;         ///< m: y_c step of the gate (excited when |phi_y| change m_ch >= gate sqrt(R))
@@ -215,6 +218,7 @@ class PayloadTracker {
   Eigen::Vector3d reset_var_ = Eigen::Vector3d::Zero();  // (reset_std x nominal)^2
   double q_b_ = 0;                       // bias_walk^2
   double bias_var_ = 0;                  // bias_std^2: a young row bias's variance after a reset
+  double twin_var_ = 0;                  // twin_bias_std^2: added to a twin's variance for a new kind's bias
   std::int64_t event_count_ = 0;
 };
 

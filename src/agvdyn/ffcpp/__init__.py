@@ -155,8 +155,8 @@ def read_parameter_file(path) -> dict:
 
 #: Fields of agvdyn.online.TrackerSettings that the C++ tracker takes (the rest belong to the rows).
 TRACKER_SETTINGS = ("change_size", "gate", "correlation", "rotation_correlation", "threshold", "random_walk",
-                    "bias_walk", "reset_std", "noise_time", "warm_rows", "initial_std", "bias_std", "noise",
-                    "com_offset", "offset_change", "offset_std", "offset_walk")
+                    "bias_walk", "reset_std", "noise_time", "warm_rows", "initial_std", "bias_std", "twin_bias_std",
+                    "noise", "com_offset", "offset_change", "offset_std", "offset_walk")
 
 
 def track_rows(kind, phi, z, state, settings, nominal, dt: float):

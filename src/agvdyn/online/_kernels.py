@@ -16,7 +16,7 @@ _jit = njit(cache=True, error_model="numpy")
 
 #: Layout of the constants vector ``k`` of :func:`track_rows`.
 (K_DELTA_M, K_DELTA_C, K_Q_M, K_Q_C, K_Q_B, K_RESET_M, K_RESET_C, K_CORR, K_GATE, K_H, K_TAU_R, K_WARM,
- K_DT, K_CORR_G, K_BIAS_VAR, K_DELTA_Y, K_Q_Y, K_RESET_Y, K_NCONST) = range(19)
+ K_DT, K_CORR_G, K_BIAS_VAR, K_DELTA_Y, K_Q_Y, K_RESET_Y, K_TWIN_VAR, K_NCONST) = range(20)
 #: Layout of one event row (``events``).
 (E_K, E_START, E_PARAM, E_BEFORE, E_BEFORE_VAR, E_AFTER, E_AFTER_VAR, E_SIGN, E_NCOLS) = range(9)
 #: CUSUM level below which its window (start row and statistics) restarts: a CUSUM that hovers
@@ -35,6 +35,10 @@ INFORMED = 1.0 - 1e-6
 #: (x_ch straight, y_ch, gamma_ch, x_ch car-like): ``n_rows`` holds the rows per kind, then per class.
 KINDS = 8
 CLASSES = 4
+#: ``n_rows`` after the rows per kind and per class: the *tested* rows per kind (rows a CUSUM ran on: the kind
+#: warm and its coordinate's parameter excited); a bias with fewer than ``warm`` of them is unverified.
+TESTED = KINDS + CLASSES
+COUNTS = TESTED + KINDS
 CAR_LIKE = 3  # the noise class of the car-like rows (kinds 7, 8: the biases of x_ch+, x_ch-)
 
 
@@ -77,6 +81,9 @@ def _reset_payload(theta, P, I, b, reset_var, n_rows, young, bias_var, ns):
     for j in range(2, NS):
         seen = n_rows[j - 2] + (n_rows[j + 4] if j < 4 else 0.0)  # x_ch biases: straight and car-like rows
         sel[j] = I[j, j] > 0.0 and seen < young
+        tested = n_rows[TESTED + j - 2] + (n_rows[TESTED + j + 4] if j < 4 else 0.0)
+        if not sel[j] and seen > 0.0 and tested < young / YOUNG_WARMUPS:
+            _unknown_bias(P, j, bias_var, ns)  # learnt from rows no CUSUM checked: it may hold the change
     if ns > NS:
         sel[OFFSET] = True
     A = np.zeros((ns, ns))
@@ -112,6 +119,32 @@ def _reset_payload(theta, P, I, b, reset_var, n_rows, young, bias_var, ns):
             for q in range(ns):
                 if sel[q]:
                     P[p, q] = Ainv[p, q]
+
+
+@_jit
+def _unknown_bias(P, j, bias_var, ns):
+    """Bias ``j`` treated as unknown: its variance back to the prior ``bias_var``, uncorrelated (value kept)."""
+    for q in range(ns):
+        P[j, q] = 0.0
+        P[q, j] = 0.0
+    P[j, j] = bias_var
+
+
+@_jit
+def _twin_bias(theta, P, n_rows, c, j, warm, twin_var, ns):
+    """At the first row of kind ``c`` (1..6) whose twin (the same coordinate, the other sign of its velocity)
+    is warm: its bias starts at the twin's, variance the twin's plus ``twin_var``, uncorrelated. Returns
+    whether the kind counts as warm through its twin (its CUSUMs then run from this row on)."""
+    if c > 6:
+        return False
+    twin = c + 1 if c % 2 == 1 else c - 1
+    if n_rows[twin - 1] < warm:
+        return False
+    if n_rows[c - 1] == 0.0 and (c > 2 or n_rows[c + 5] == 0.0):  # the bias's first row (x_ch: car-like ones too)
+        var = P[1 + twin, 1 + twin] + twin_var
+        theta[j] = theta[1 + twin]
+        _unknown_bias(P, j, var, ns)
+    return True
 
 
 @_jit
@@ -223,6 +256,7 @@ def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n
     for p in range(ns):
         f[p] = 0.0
     f[0], f[1], f[j] = phi_m, phi_c, 1.0
+    twin_warm = _twin_bias(theta, P, n_rows, c, j, k[K_WARM], k[K_TWIN_VAR], ns)
     r_c = R[cls]
     r_eff = r_c * (k[K_CORR_G] if cls == 2 else k[K_CORR])
     excited, excited_y = _predict(P, f, phi_m, phi_c, phi_y, math.sqrt(r_c), k, delta, q, reset_var, ns)
@@ -238,7 +272,7 @@ def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n
     for p in range(ns):
         fPf += f[p] * Pf[p]
     out_nis[n] = r * r / (fPf + r_c)
-    warm = n_rows[c - 1] >= k[K_WARM]  # rows of this kind (its bias has settled)
+    warm = n_rows[c - 1] >= k[K_WARM] or twin_warm  # rows of this kind (its bias has settled), or of its twin
     # the noise class learns from the rows of its own test (car-like rows: also the C_ch-excited ones, whose
     # yaw misfit, e.g. tyre scrub, would otherwise pull C_ch with the straight rows' weight)
     tested = warm and (excited[1 if cls == 2 else 0] or (cls == CAR_LIKE and excited[1]))
@@ -268,11 +302,15 @@ def _update(n, phi_m, phi_c, phi_y, z, c, k, delta, q, reset_var, theta, P, R, n
     _joseph(P, K, f, r_eff, tmp, ns)
     for p in range(ns):
         theta[p] += K[p] * r
-    if tested and gmax < 0.5 * k[K_H]:  # the noise level: from rows the detector tests, none while a change builds up
+    # the noise level: from rows the detector tests, none while a change builds up (any CUSUM above h / 2; for
+    # rotation rows, which fit to their noise on both plants, while C_ch's window is open: above RESTART)
+    if tested and gmax < 0.5 * k[K_H] and not (cls == 2 and max(g[1, 0], g[1, 1]) > RESTART):
         lam = max(1.0 / (n_rows[KINDS + cls] + 1.0), k[K_DT] / k[K_TAU_R])
         R[cls] += lam * (r * r - R[cls])
     n_rows[KINDS + cls] += 1.0
     n_rows[c - 1] += 1.0
+    if warm and excited[1 if cls == 2 else 0]:
+        n_rows[TESTED + c - 1] += 1.0  # a row its CUSUM ran on
     return _detect(n, k, theta, P, n_rows, g, Iw, bw, start, reset_var, out_event, events, n_events, ns)
 
 
