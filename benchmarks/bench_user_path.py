@@ -245,8 +245,10 @@ def worker(result: str, args: list[str], repeat: int) -> None:
 
     from agvdyn._memory import keep_freed_memory
 
-    keep_freed_memory(trim=256 << 20, top_pad=64 << 20)  # as agvdyn.cli.main
-    from agvdyn.cli import app
+    from agvdyn.cli import app, one_blas_thread
+
+    one_blas_thread()  # as agvdyn.cli.main
+    keep_freed_memory(trim=256 << 20, top_pad=64 << 20)
 
     def run() -> float:
         t0 = time.perf_counter()
