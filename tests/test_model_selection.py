@@ -284,19 +284,20 @@ def _stribeck_fit(support: dict, velocities=(0.0334, 0.0079, 0.0544), com_offset
 
 
 def test_bic_counts_every_fitted_column_and_searched_value():
-    """k of a Stribeck fit: the three levels (also those reported at the paper's law for want of rows in their
-    Stribeck range: their columns were fitted) and the three searched velocities; x_c, held at 0 by design,
-    not; the delay's search one."""
+    """k of a Stribeck fit: the levels the regression fitted and their searched velocities; a level without rows in
+    its Stribeck range is held at the paper's law (not fitted: neither it nor its velocity counts; the rule before
+    counted all six); x_c, held at 0 by design, not; the delay's search one."""
     from agvdyn.identification.selection_rows import bic_parameter_count, determined_breakaway
 
     wheels_only = _stribeck_fit({"l": 0, "r": 0, "w": 12630})
     assert determined_breakaway(wheels_only) == ("w",)
-    assert bic_parameter_count(ModelSpec(friction="stribeck"), wheels_only) == 14 + 6  # the rule before: 14 + 4
-    assert bic_parameter_count(wheels_only.model, wheels_only) == 14 + 3  # velocities given: not searched
+    assert bic_parameter_count(ModelSpec(friction="stribeck"), wheels_only) == 14 + 2  # d_sw, w_sw
+    assert bic_parameter_count(wheels_only.model, wheels_only) == 14 + 1  # velocities given: not searched
     every = _stribeck_fit({"l": 0, "r": 0, "w": 12630}, com_offset=True)
     searched_all = ModelSpec(friction="stribeck", delay="auto", com_offset=True)
-    assert bic_parameter_count(searched_all, every) == 14 + 3 + 3 + 1 + 1  # levels, velocities, y_c, delay
-    assert determined_breakaway(_stribeck_fit({"l": 900, "r": 0, "w": 12630})) == ("l", "w")
+    assert bic_parameter_count(searched_all, every) == 14 + 2 + 1 + 1  # d_sw and w_sw, y_c, delay
+    left = _stribeck_fit({"l": 900, "r": 0, "w": 12630})
+    assert determined_breakaway(left) == ("l", "w") and bic_parameter_count(ModelSpec(friction="stribeck"), left) == 18
     assert determined_breakaway(None) is None
 
 
@@ -352,6 +353,73 @@ def test_the_velocity_of_a_level_at_the_papers_law_does_not_exclude_the_model():
     assert _undetermined(ModelSpec(friction="stribeck"), fit, 0.5) == ("w_sw",)
 
 
+def test_bic_on_rows_counts_only_the_parameters_of_those_rows():
+    """Measured on our plant's breakaway log (1.3x, w_s 0.05, seed 1, stick-slip rows with stiction threshold
+    0.005, tau 209): the Stribeck fit (steering levels held at the paper's law: no rows in their range) lowers
+    J/tau on the chassis rows by 2.55 (x_ch) and 11.02 (gamma_ch), its held-out error there 0.00885 against
+    0.00934. On the chassis rows it adds d_sw and w_sw: kept. Charged six values (the rule before: every level
+    and velocity, fitted or not) it was not. A column without an entry on the comparison rows (a determined
+    steering level on the chassis rows) and its velocity do not count there; on all rows every column counts."""
+    from agvdyn.identification.selection import versus
+    from agvdyn.identification.selection_rows import rows_parameter_count
+
+    paper, stribeck, *_ = candidate_models()
+    tau = 209.1
+    rows = {"alpha_l": 6200, "alpha_r": 5100, "x_ch": 9800, "gamma_ch": 9700}
+    gain = {"alpha_l": 0.08, "alpha_r": 0.46, "x_ch": -2.55, "gamma_ch": -11.02}
+    base = {g: (float(n), n) for g, n in rows.items()}
+    ss = {g: (n * math.exp(gain[g] * tau / n), n) for g, n in rows.items()}
+    held = {"steer_left:alpha_l": (1.0, 100.0), "steer_right:alpha_r": (1.0, 100.0),
+            "straight:x_ch": (0.0934**2, 1.0), "rotation:gamma_ch": (0.0934**2, 1.0)}
+    held_s = {**held, "straight:x_ch": (0.0885**2, 1.0), "rotation:gamma_ch": (0.0885**2, 1.0)}
+    fit = _stribeck_fit({"l": 172, "r": 77, "w": 4965})
+    wheels = {"d_sw": ("alpha_l", "alpha_r", "gamma_ch", "x_ch")}
+    new = dataclasses.replace(_pieces(stribeck, ss, held_s, 16, tau), identification=fit, columns=wheels)
+    old = dataclasses.replace(new, k=20, columns={})
+    p = _pieces(paper, base, held, 14, tau)
+    chassis = ("x_ch", "gamma_ch")
+    log_n = math.log((rows["x_ch"] + rows["gamma_ch"]) / tau)
+    v_old, v_new = versus(old, p), versus(new, p)
+    assert v_old["rows"] == v_new["rows"] == list(chassis)
+    assert v_old["bic"] - v_old["bic_other"] == pytest.approx(-13.57 + 6 * log_n, rel=1e-6) and not v_old["better"]
+    assert v_new["bic"] - v_new["bic_other"] == pytest.approx(-13.57 + 2 * log_n, rel=1e-6) and v_new["better"]
+    assert chosen_model([p, old])[0] == 0 and chosen_model([p, new])[0] == 1
+    every = {**wheels, "d_sl": ("alpha_l",), "d_sr": ("alpha_r",)}  # all three determined (k 20)
+    assert rows_parameter_count(20, stribeck, every, chassis) == 16  # d_sl, w_sl, d_sr, w_sr not on them
+    assert rows_parameter_count(20, stribeck, every, None) == 20
+    assert rows_parameter_count(20, stribeck, every, ("alpha_l",)) == 18
+    assert rows_parameter_count(17, stribeck.replace(stribeck_velocities=(0.05,) * 3), every, chassis) == 15
+    assert rows_parameter_count(20, stribeck, {}, chassis) == 20  # no blocks kept: unknown, all count
+
+
+def test_column_groups_are_the_coordinates_a_column_touches_on_kept_rows():
+    """A column counts on a coordinate where it has a nonzero entry on a kept row: not where it is zero, nor
+    where its only entries are on dropped rows; blocks without model columns add nothing."""
+    from agvdyn.identification.equations import EquationBlock
+    from agvdyn.identification.selection_rows import column_groups
+    from agvdyn.kinematics import Mode
+
+    n = 6
+    def block(mode, model_regressor, keep):
+        k = len(mode.coordinates)
+        z = np.zeros((n, k))
+        return EquationBlock("s", mode.name, mode, np.arange(n) * 0.01, np.zeros((n, k, 11)), z, z, keep,
+                             np.zeros((n, k, 4)), model_regressor=model_regressor)
+    parking = np.zeros((n, 2, 3))
+    parking[:, 0, 0] = 1.0  # d_sl on alpha_l
+    parking[:, :, 2] = 0.5  # d_sw on both
+    parking[0, 1, 1] = 2.0  # d_sr on alpha_r, on a dropped row only
+    keep = np.ones((n, 2), bool)
+    keep[0, 1] = False
+    straight = np.zeros((n, len(Mode.STRAIGHT.coordinates), 3))
+    straight[:, 0, 2] = 0.1
+    blocks = [block(Mode.PARKING, parking, keep), block(Mode.STRAIGHT, straight, np.ones(straight.shape[:2], bool)),
+              block(Mode.ROTATION, None, np.ones((n, 1), bool))]
+    found = column_groups(blocks, ("d_sl", "d_sr", "d_sw"))
+    assert found == {"d_sl": (Mode.PARKING.coordinates[0],), "d_sr": (),
+                     "d_sw": tuple(sorted(set(Mode.PARKING.coordinates) | {Mode.STRAIGHT.coordinates[0]}))}
+
+
 # --- held-out error -------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -380,6 +448,27 @@ def test_holdout_of_exact_rows_is_zero_and_of_a_zero_model_one(exact_blocks):
     assert holdout_nrmse(exact_blocks, _paper_refit, parts=3) < 1e-6
     zero = lambda blocks: (lambda b: np.zeros_like(b.torque))  # noqa: E731
     assert holdout_nrmse(exact_blocks, zero, parts=3) == pytest.approx(1.0)
+
+
+def test_a_fold_without_chassis_rows_leaves_the_offset_undetermined(exact_blocks):
+    """Regression (issue 30 study: compare_models on an identification plus a car-like log, ZeroDivisionError on
+    5 of 11 payload runs): a held-out fold without chassis rows holds m_ch at 0, and the offset y_c = (m_ch y_c)
+    / m_ch divided by it. The fold's fit now reports x_c, y_c unbounded, and the fold's predictor works."""
+    from agvdyn.identification import IdentificationSettings, fit_blocks
+    from agvdyn.identification.model_fit import linear_values
+    from agvdyn.platform import PROTOTYPE
+
+    model = ModelSpec(com_offset=True)
+    steering = [dataclasses.replace(b, model_regressor=np.zeros(b.torque.shape + (2,)))
+                for b in exact_blocks if b.segment.startswith("steer")]
+    lenient = IdentificationSettings.from_flat(uncertainty="classic", plausibility=False, unexcited="report",
+                                               max_relative_std=math.inf)
+    fit = fit_blocks(steering, PROTOTYPE, settings=lenient, model=model)
+    assert fit.parameters.m_ch == 0.0 and math.isinf(fit.std["m_ch"])
+    assert fit.extra == {"x_c": 0.0, "y_c": 0.0} and all(math.isinf(v) for v in fit.extra_std.values())
+    extra = linear_values(model, fit.extra, fit.parameters)
+    predicted = steering[0].model_torque(fit.parameters.to_vector(), fit.offset_vector, extra)
+    assert np.allclose(predicted, steering[0].torque, atol=1e-6 * np.abs(steering[0].torque).max())
 
 
 def test_holdout_folds_leave_each_part_out_once_with_a_gap(exact_blocks):
@@ -434,6 +523,45 @@ def _short_log(seed: int, shift: int = 0, *, model_plant: bool = False):
         frame[cols] = frame[cols].shift(shift)
         frame = frame.iloc[shift:].reset_index(drop=True)
     return Log.from_frame(frame, sidecar=r.sidecar())
+
+
+def test_breakaway_levels_without_support_are_held_at_the_papers_law():
+    """A level whose group has no rows in its Stribeck range is held at d_s = d_c in the regression (its column
+    joins d_c's, which becomes the paper's H^T tanh), not fitted: with all three held the Stribeck fit of a log is
+    the paper's fit of it -- values to 1e-12, the HAC std (from the stored rows) to 1e-9, the residuals alike --
+    and the levels are reported at the paper's law with an unbounded interval. Before, their columns stayed free
+    and fitted the filter's tails of the stick phases (the steering rows' residuals fell, the d_c moved)."""
+    from agvdyn.identification import fit_blocks, identify
+    from agvdyn.identification.account import RowCounts
+    from agvdyn.identification.settings import IdentificationSettings
+    from agvdyn.platform import PROTOTYPE
+
+    log = _short_log(0)
+    model = ModelSpec(friction="stribeck", stribeck_velocities=(0.05, 0.05, 0.05))
+    lenient = IdentificationSettings.from_flat(unexcited="report", plausibility=False, max_relative_std=math.inf)
+    rows = identify(log, PROTOTYPE, model=model, keep_blocks=True, settings=lenient).blocks
+    paper = fit_blocks(identify(log, PROTOTYPE, keep_blocks=True).blocks, PROTOTYPE)
+    held = fit_blocks(rows, PROTOTYPE, model=model, counts=RowCounts(stribeck_support={"l": 0, "r": 0, "w": 0}))
+    free = fit_blocks(rows, PROTOTYPE, model=model, settings=lenient, counts=RowCounts(stribeck_support={}))
+    for n in paper.std:
+        assert getattr(held.parameters, n) == pytest.approx(getattr(paper.parameters, n), rel=1e-12, abs=1e-12)
+        assert held.std[n] == pytest.approx(paper.std[n], rel=1e-9)
+    for g, (rss, n) in paper.residual_ss.items():
+        assert held.residual_ss[g][0] == pytest.approx(rss, rel=1e-9) and held.residual_ss[g][1] == n
+    assert {n: held.extra[n] for n in ("d_sl", "d_sr", "d_sw")} == {
+        "d_sl": held.parameters.d_cl, "d_sr": held.parameters.d_cr, "d_sw": held.parameters.d_cw}
+    assert all(math.isinf(held.extra_std[n]) for n in ("d_sl", "d_sr", "d_sw"))
+    # free columns (support not judged): the steering rows' residuals fall, so the fit is not the paper's
+    assert free.residual_ss["alpha_l"][0] < 0.999 * paper.residual_ss["alpha_l"][0]
+    # a fixed sliding level: the held breakaway level is held at its value
+    from agvdyn.identification.settings import DEFAULT_FIXED
+
+    fixed = {**DEFAULT_FIXED, "d_cw": 4.0}
+    paper_fixed = fit_blocks(identify(log, PROTOTYPE, keep_blocks=True).blocks, PROTOTYPE, fixed=fixed)
+    held_fixed = fit_blocks(rows, PROTOTYPE, model=model, fixed=fixed,
+                            counts=RowCounts(stribeck_support={"l": 0, "r": 0, "w": 0}))
+    assert held_fixed.extra["d_sw"] == 4.0 and held_fixed.parameters.m_ch == pytest.approx(paper_fixed.parameters.m_ch,
+                                                                                           rel=1e-12)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -510,10 +638,14 @@ def test_auto_keeps_the_paper_model_on_an_effect_free_log(effect_free_selection)
                           "chosen"}
         assert e["error"] is not None or (e["bic"] is not None and 0 < e["nrmse_holdout"] < 1)
     assert selection.correlation_steps > 1 and selection.n_effective < plain.n_rows
-    paper, stribeck = selection.scores[:2]  # three levels and three searched velocities, all fitted: all counted
-    assert stribeck.error is None and stribeck.k == paper.k + 6
-    # the steering groups' levels lack rows in their Stribeck range: compared on the wheels' evidence, the chassis
-    assert stribeck.identification.rows.stribeck_support["l"] < 500 and stribeck.versus_paper["rows"] == ["x_ch", "gamma_ch"]
+    paper, stribeck = selection.scores[:2]
+    # the steering groups' levels lack rows in their Stribeck range: held at the paper's law (not fitted, not
+    # counted: k counts d_sw and w_sw), compared on the wheels' evidence, the chassis
+    support = stribeck.identification.rows.stribeck_support
+    assert support["l"] < 500 and support["r"] < 500 and support["w"] >= 500
+    assert stribeck.error is None and stribeck.k == paper.k + 2
+    assert stribeck.versus_paper["rows"] == ["x_ch", "gamma_ch"]
+    assert stribeck.identification.extra["d_sl"] == stribeck.identification.parameters.d_cl
     com = selection.scores[3]  # straight and rotation apart: y_c is not excited (std inf); x_c is held by design
     assert "y_c" in com.undetermined and "x_c" not in com.undetermined and not com.usable
 

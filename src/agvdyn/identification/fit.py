@@ -46,6 +46,7 @@ from agvdyn.identification.model_fit import (
     unsupported_breakaway,
     noisy_extensions,
     residual_sums,
+    tie_unsupported,
     with_unobservable,
 )
 from agvdyn.identification.model_rows import resolved_model
@@ -141,11 +142,12 @@ def fit_regression(data: RegressionData, geometry: Geometry, *, fixed: Mapping[s
     est = estimator if estimator is not None else settings.fit.make_estimator()
     account = account if account is not None else RowAccount()
     data, free, unseen = hold_unobservable(data, free, model)
+    unsupported = unsupported_breakaway(model, account.counts.stribeck_support)
+    data, free = tie_unsupported(data, free, unsupported)  # at the paper's law d_s = d_c
     check = with_unobservable(check_excitation(data, free, est, settings), unseen)
     fitted = estimate(check, est, settings)
     unc = fit_uncertainty(check, fitted, settings, workers)
-    unsupported = unsupported_breakaway(model, account.counts.stribeck_support)
-    if unsupported:  # fitted but not determined: unbounded, left out of the plausibility checks
+    if unsupported:  # not determined: unbounded, left out of the plausibility checks
         check = dataclasses.replace(check, unbounded=check.unbounded | frozenset(unsupported),
                                     warnings=check.warnings + tuple(unsupported.values()))
         unc.std.update(dict.fromkeys(unsupported, math.inf))

@@ -29,8 +29,8 @@ from agvdyn.identification.regression import Dependency
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, FRICTION_GROUPS, STRIBECK_NAMES, ModelSpec
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
-__all__ = ["UNOBSERVABLE", "hold_unobservable", "with_unobservable", "extension_estimates", "breakaway_warnings",
-           "unsupported_breakaway", "held_parameters", "MIN_SUPPORT_ROWS",
+__all__ = ["UNOBSERVABLE", "hold_unobservable", "tie_unsupported", "with_unobservable", "extension_estimates",
+           "breakaway_warnings", "unsupported_breakaway", "held_parameters", "MIN_SUPPORT_ROWS",
            "noisy_extensions", "residual_sums", "linear_values"]
 
 
@@ -53,6 +53,26 @@ def hold_unobservable(data: RegressionData, free: Sequence[str], model: ModelSpe
         return data, list(free), {}
     held = [list(free).index(n) for n in unseen]
     return data.holding(held, np.zeros(len(held))), [n for n in free if n not in unseen], unseen
+
+
+def tie_unsupported(data: RegressionData, free: Sequence[str], unsupported: Mapping[str, str]
+                    ) -> tuple[RegressionData, list[str]]:
+    """``data`` and ``free`` with the breakaway levels ``unsupported`` (:func:`unsupported_breakaway`) held at the
+    paper's law ``d_s = d_c``: each level's column joins its group's ``d_c`` column (``H^T [(1 - e) tanh] +
+    H^T [e tanh] = H^T tanh``, the paper's) and leaves the regression; with ``d_c`` fixed, the level is held
+    at its value."""
+    free = list(free)
+    tied = [(n, FRICTION_GROUPS[n[-1]][1]) for n in BREAKAWAY_NAMES if n in unsupported and n in free]
+    joined = [(free.index(n), free.index(c)) for n, c in tied if c in free]
+    held = [n for n, c in tied if c not in free]
+    if joined:
+        data = data.tying([c for c, _ in joined], [t for _, t in joined])
+    names = [n for n in free if n not in {n for n, c in tied if c in free}]
+    if held:
+        values = [data.theta_fixed[PARAMETER_NAMES.index(FRICTION_GROUPS[n[-1]][1])] for n in held]
+        data = data.holding([names.index(n) for n in held], np.array(values))
+        names = [n for n in names if n not in held]
+    return data, names
 
 
 def with_unobservable(check: ExcitationCheck, unseen: Mapping[str, str]) -> ExcitationCheck:
@@ -117,7 +137,8 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
     used rows in their Stribeck range (``support``, counted by the row pass; empty: not counted, nothing
     judged). Their column then holds only the filter's tails of stick phases (a passive steering sticks
     at every reversal and crosses the range within milliseconds): a number fitted there is not a
-    breakaway level. They are reported at the paper's law (``d_s = d_c``) with an unbounded interval."""
+    breakaway level. They are held at the paper's law (``d_s = d_c``, :func:`tie_unsupported`) and reported with an
+    unbounded interval."""
     if not model.stribeck or not support:
         return {}
     out = {}
@@ -126,8 +147,8 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
         if n < MIN_SUPPORT_ROWS:
             out[f"d_s{g}"] = (f"d_s{g} not determined: {n} used rows of the {_GROUP_NAMES[g]} run in its Stribeck range "
                               f"(|rate| < {0.83 * w_s:.3g} rad/s, needs {MIN_SUPPORT_ROWS}); its column holds only the "
-                              "filter's tails of stick phases. Reported at the paper's law d_s = d_c, interval unbounded "
-                              "(slow steady motion of that joint would show it)")
+                              "filter's tails of stick phases. Held at the paper's law d_s = d_c (its column joins "
+                              "d_c's), interval unbounded (slow steady motion of that joint would show it)")
     return out
 
 

@@ -257,6 +257,7 @@ class RegressionData:
     key_pseudo: tuple[np.ndarray, ...] = ()
     store: RowStore | None = None
     row_order: np.ndarray | None = None  # rows of A in the store's order, when they differ
+    ties: tuple[tuple[int, int], ...] = ()  # (column, free column): one parameter for both (:meth:`tying`)
 
     def residual_rms(self, coef: np.ndarray) -> dict[str, float]:
         """RMS of tau - Theta p per "segment:coordinate" (pooled over logs): from the stored rows
@@ -293,10 +294,27 @@ class RegressionData:
         return dataclasses.replace(self, A=self.A[:, keep], y=self.y - shift, free=tuple(self.free[i] for i in keep),
                                    theta_fixed=theta_fixed, key_pseudo=pseudo)
 
+    def tying(self, columns: Sequence[int], targets: Sequence[int]) -> "RegressionData":
+        """The same system with the free columns at positions ``columns`` tied to those at ``targets``
+        (one parameter for both: each column added to its target's, then dropped; its value the target's)."""
+        keep = [i for i in range(len(self.free)) if i not in set(columns)]
+
+        def tied(M: np.ndarray) -> np.ndarray:
+            M = M.copy()
+            for c, t in zip(columns, targets):
+                M[:, t] += M[:, c]
+            return M[:, keep + list(range(len(self.free), M.shape[1]))]
+
+        pairs = tuple((self.free[c], self.free[t]) for c, t in zip(columns, targets))
+        return dataclasses.replace(self, A=tied(self.A), free=tuple(self.free[i] for i in keep),
+                                   key_pseudo=tuple(tied(P) for P in self.key_pseudo), ties=self.ties + pairs)
+
     def theta(self, coef: np.ndarray) -> np.ndarray:
         """All columns' values (fixed ones as given) from the free ones."""
         theta = self.theta_fixed.copy()
         theta[list(self.free)] = coef
+        for column, target in self.ties:
+            theta[column] = theta[target]
         return theta
 
     def group_rss(self, coef: np.ndarray) -> np.ndarray:
@@ -363,7 +381,7 @@ class RegressionData:
         """:meth:`recordings` as one callable per recording that forms its rows when called."""
         if self.store is None:
             raise RuntimeError("these regression data keep no rows")
-        yield from self.store.free_jobs(self.free, self.theta_fixed)
+        yield from self.store.free_jobs(self.free, self.theta_fixed, self.ties)
 
 
 def regression_data(stats: RowStatistics, group_names: dict[str, int], free: Sequence[int], theta_fixed: np.ndarray,

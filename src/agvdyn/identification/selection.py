@@ -33,7 +33,8 @@ delay alone, both are scored on the delay's evidence rows, those its search uses
 :func:`.model_search.delay_evidence`): the steering rows carry the steering joints' stick-slip, which the
 tanh law lacks and which looks like a torque lead, and would vote any real delay down on our plant.
 The Stribeck law likewise on the rows of the joint groups whose breakaway level the fit determined
-(the wheels': chassis rows; none determined: never kept).
+(the wheels': chassis rows; none determined: never kept); ``k`` there counts the columns with an entry on
+those rows (:func:`.selection_rows.rows_parameter_count`).
 
 ``auto`` (:func:`chosen_model`): an extension passes when it lowers both the BIC and the held-out
 error of the paper's model on their comparison rows and none of its parameters is undetermined (std
@@ -68,8 +69,9 @@ from agvdyn.identification.model_search import (
 from agvdyn.identification.plausibility import ImplausibleError, implausible_parameters
 from agvdyn.identification.regression import UnidentifiableError
 from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, bic_parameter_count,
-                                                  comparison_rows, determined_breakaway, holdout_nrmse,
-                                                  holdout_of_sums, holdout_parts)
+                                                  column_groups, comparison_rows, determined_breakaway,
+                                                  holdout_nrmse, holdout_of_sums, holdout_parts,
+                                                  rows_parameter_count)
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
 from agvdyn.io import Log, LogFile
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, DELAY_RANGE, STRIBECK_NAMES, STRIBECK_RANGE, ModelSpec
@@ -141,6 +143,7 @@ class ModelScore:
     holdout_sums: Mapping[str, tuple[float, float]] = field(default_factory=dict, repr=False)
     correlation_steps: float = math.nan
     reference_rows: Mapping[str, int] = field(default_factory=dict, repr=False)
+    columns: Mapping[str, tuple[str, ...]] = field(default_factory=dict, repr=False)
     versus_paper: dict[str, Any] | None = None
 
     @property
@@ -158,7 +161,8 @@ class ModelScore:
             return self.bic, self.nrmse_holdout
         if not groups:
             return math.nan, math.nan
-        return (bic_on_rows(self.residual_ss, self.k, self.correlation_steps, self.reference_rows, groups),
+        k = rows_parameter_count(self.k, self.model, self.columns, groups)
+        return (bic_on_rows(self.residual_ss, k, self.correlation_steps, self.reference_rows, groups),
                 holdout_of_sums(self.holdout_sums, groups))
 
     @property
@@ -262,12 +266,14 @@ class ModelSelection:
 
 
 def _refit(model: ModelSpec, geometry: Any, fixed: Mapping[str, float], settings: IdentificationSettings,
-           estimator: Any) -> Refit:
-    """The held-out refit of a fitted (resolved) model on blocks: values only (:func:`.model_search.search_settings`)."""
+           estimator: Any, counts: Any = None) -> Refit:
+    """The held-out refit of a fitted (resolved) model on blocks: values only (:func:`.model_search.search_settings`);
+    ``counts``: the whole fit's row counts (its breakaway levels without support held in the folds as there)."""
     quick = search_settings(settings)
+    account = {} if counts is None else {"counts": counts}
 
     def refit(blocks: Sequence[EquationBlock]) -> Callable[[EquationBlock], np.ndarray]:
-        fit = fit_blocks(blocks, geometry, fixed=fixed, settings=quick, estimator=estimator, model=model)
+        fit = fit_blocks(blocks, geometry, fixed=fixed, settings=quick, estimator=estimator, model=model, **account)
         p, offsets = fit.parameters.to_vector(), fit.offset_vector
         extra = linear_values(model, fit.extra, fit.parameters)
         return lambda b: b.model_torque(p, offsets, extra)
@@ -342,14 +348,17 @@ class _Scoring:
         k = bic_parameter_count(model, ident)
         bic, j, _ = information_bic(ident.residual_ss, k, self.steps, self.reference)
         rss, rows = (sum(v) for v in zip(*ident.residual_ss.values()))
-        refit = _refit(ident.model, self.geometry, self.options["fixed"], settings, self.options["estimator"])
+        refit = _refit(ident.model, self.geometry, self.options["fixed"], settings, self.options["estimator"],
+                       ident.rows if ident.model.stribeck else None)
         held_out = holdout_parts(ident.blocks, refit, parts=self.parts, gap_s=self.gap_s)
         return ModelScore(model, ident.model, bic=bic, likelihood=j, k=k, residual_rms=math.sqrt(rss / rows),
                           nrmse_holdout=holdout_of_sums(held_out),
                           undetermined=_undetermined(model, ident, settings.fit.max_relative_std), error=error,
                           nrmse_validation=None if self.validation is None else float(self.validation(ident)),
                           fits=fit.fits + self.parts, identification=ident, residual_ss=dict(ident.residual_ss),
-                          holdout_sums=held_out, correlation_steps=self.steps, reference_rows=self.reference)
+                          holdout_sums=held_out, correlation_steps=self.steps, reference_rows=self.reference,
+                          columns={n: g for n, g in column_groups(ident.blocks, ident.model.linear_names).items()
+                                   if n not in held_parameters(model, ident)})  # the columns k counts
 
     def final(self, score: ModelScore) -> ModelScore:
         """The chosen extension refitted with the settings (refusals as ``identify`` makes them), the

@@ -17,8 +17,10 @@ the wheels' on the chassis rows; a group whose level the fit could not determine
 Stribeck range, :func:`.model_fit.unsupported_breakaway`) gives none. On our plant's effect-free logs
 the Stribeck model's gain is all on the steering rows (seed 3: J/tau -19.5 alpha_l, -31.3 alpha_r,
 +0.1 chassis), made by the steering groups' columns whose levels it reports as undetermined (their
-columns fit the filter's tails of the steering joints' stick phases). The BIC counts every fitted
-column and searched value (:func:`bic_parameter_count`), those levels included.
+columns fit the filter's tails of the steering joints' stick phases); those levels are now held at the
+paper's law in the fit (:func:`.model_fit.tie_unsupported`). The BIC counts every fitted column and
+searched value (:func:`bic_parameter_count`); on some coordinate groups only those with an entry on their
+rows (:func:`rows_parameter_count`): the likelihood of those rows depends on no other.
 """
 from __future__ import annotations
 
@@ -35,8 +37,8 @@ from agvdyn.identification.settings import CHASSIS_COORDINATES
 from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
 
 __all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows",
-           "bic_on_rows", "bic_parameter_count", "breakaway_evidence", "determined_breakaway", "ROWS_CHOICES",
-           "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE"]
+           "bic_on_rows", "bic_parameter_count", "rows_parameter_count", "column_groups", "breakaway_evidence",
+           "determined_breakaway", "ROWS_CHOICES", "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE"]
 
 #: Parts of each segment in the held-out error's cross-validation.
 HOLDOUT_PARTS = 4
@@ -130,12 +132,47 @@ def determined_breakaway(ident: Any) -> tuple[str, ...] | None:
 def bic_parameter_count(model: ModelSpec, ident: Any) -> int:
     """``k`` of the BIC of a fit ``ident`` of ``model``: every column the regression estimated (the paper's free
     parameters, the torque offsets, the model's columns but those held at 0 by design, :data:`.model_fit.UNOBSERVABLE`)
-    and every searched value (the delay, the Stribeck velocities). A breakaway level reported at the paper's
-    law for want of rows in its Stribeck range was still fitted and counts, as does its searched velocity."""
-    columns = [n for n in ident.model.linear_names if n not in UNOBSERVABLE]
-    searched = ((DELAY,) if model.delay == "auto" else ()) + (
-        STRIBECK_NAMES if model.stribeck and model.stribeck_velocities is None else ())
+    and every searched value (the delay, the Stribeck velocities). A breakaway level without rows in its Stribeck
+    range is held at the paper's law in the fit (:func:`.model_fit.tie_unsupported`): neither it nor its searched
+    velocity counts (the model does not depend on that velocity)."""
+    held = set(unsupported_breakaway(ident.model, ident.rows.stribeck_support)) if ident.model.stribeck else set()
+    columns = [n for n in ident.model.linear_names if n not in UNOBSERVABLE and n not in held]
+    searched = ((DELAY,) if model.delay == "auto" else ()) + tuple(
+        n for n in (STRIBECK_NAMES if model.stribeck and model.stribeck_velocities is None else ())
+        if f"d_s{n[-1]}" not in held)
     return len(ident.std) + len(ident.offsets_std) + len(columns) + len(searched)
+
+
+def column_groups(blocks: Sequence[EquationBlock], names: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """Per model column (``names``: a model's ``linear_names``, the order of the blocks' ``model_regressor``)
+    the coordinate groups on whose kept rows it has a nonzero entry. A steering group's breakaway column is
+    structurally zero on the chassis rows (and ``m_ch x_c``, ``m_ch y_c`` outside car-like turns)."""
+    seen: dict[str, set[str]] = {n: set() for n in names}
+    for b in blocks:
+        if b.model_regressor is None or b.model_regressor.shape[-1] != len(names):
+            continue
+        for j, coordinate in enumerate(b.coordinates):
+            rows = b.keep[:, j]
+            if rows.any():
+                for n in np.asarray(names)[np.any(b.model_regressor[rows, j, :] != 0, axis=0)]:
+                    seen[str(n)].add(coordinate)
+    return {n: tuple(sorted(g)) for n, g in seen.items()}
+
+
+def rows_parameter_count(k: int, model: ModelSpec, columns: Mapping[str, Sequence[str]],
+                         groups: Sequence[str] | None) -> int:
+    """``k`` of a fit (:func:`bic_parameter_count`) on the coordinate groups ``groups`` (all when None): less the
+    model's columns without an entry on their rows (``columns``: :func:`column_groups` of the columns ``k``
+    counts; held ones, x_c and levels at the paper's law, are not in ``k`` and must not be in ``columns``) and
+    the searched Stribeck velocity of each such breakaway level -- parameters the likelihood of those rows does
+    not depend on (a steering group's breakaway level and velocity on the chassis rows). Without ``columns``
+    (no blocks kept): ``k``."""
+    if groups is None or not columns:
+        return k
+    off = [n for n, where in columns.items() if n not in UNOBSERVABLE and not set(where) & set(groups)]
+    searched = model.stribeck and model.stribeck_velocities is None
+    velocities = [f"w_s{n[-1]}" for n in off if searched and n.startswith("d_s")]
+    return k - len(off) - len(velocities)
 
 
 def bic_on_rows(residual_ss: Mapping[str, tuple[float, int]], k: int, correlation_steps: float,

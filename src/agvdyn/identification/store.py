@@ -106,9 +106,11 @@ class RowStore:
         for job in self.free_jobs(free, theta_fixed):
             yield job()
 
-    def free_jobs(self, free: Sequence[int], theta_fixed: np.ndarray) -> Iterator[Callable[[], RecordingRows]]:
+    def free_jobs(self, free: Sequence[int], theta_fixed: np.ndarray,
+                  ties: Sequence[tuple[int, int]] = ()) -> Iterator[Callable[[], RecordingRows]]:
         """:meth:`free_rows` as one callable per recording that forms its rows when called (in a
-        worker thread, say); the recordings are only referenced here."""
+        worker thread, say); the recordings are only referenced here. ``ties``: (column, free column)
+        pairs, natural indices: the first column's values added to the second's (one parameter for both)."""
         free = list(free)
         w = len(theta_fixed)
         stored = np.arange(w) if self.columns is None else self.columns
@@ -116,6 +118,8 @@ class RowStore:
         held = [i for i in range(w) if theta_fixed[stored[i]] != 0.0]
         values = theta_fixed[stored[held]]
         where = np.argsort(stored)[free] if not first else None
+        if ties:
+            return self._tied_jobs(free, theta_fixed, ties)
 
         def rows_of(p: _Packed) -> RecordingRows:
             y = p.rows[:, -1]
@@ -126,8 +130,21 @@ class RowStore:
             A = p.rows[:, :len(free)] if first else p.rows[:, where]
             return RecordingRows(A, y, p.group, p.step, p.key)
 
-        for p in self.packed():
-            yield functools.partial(rows_of, p)
+        return (functools.partial(rows_of, p) for p in self.packed())
+
+    def _tied_jobs(self, free: list[int], theta_fixed: np.ndarray, ties: Sequence[tuple[int, int]]
+                   ) -> Iterator[Callable[[], RecordingRows]]:
+        """:meth:`free_jobs` with tied columns: the free rows (a copy), each tie's column added to its free column."""
+        position = np.argsort(np.arange(len(theta_fixed)) if self.columns is None else self.columns)
+
+        def rows_of(job: functools.partial) -> RecordingRows:
+            rec, p = job(), job.args[0]
+            A = np.array(rec.A, dtype=float)
+            for column, target in ties:
+                A[:, free.index(target)] += p.rows[:, position[column]]
+            return RecordingRows(A, rec.y, rec.group, rec.step, rec.key)
+
+        return (functools.partial(rows_of, job) for job in self.free_jobs(free, theta_fixed))
 
     def row_counts(self) -> list[int]:
         """Rows of each recording, without reading them back."""
