@@ -168,3 +168,28 @@ def identification_frame(durations: dict[str, float] | None = None, *, geometry:
                                       beta0=beta0, repeats=repeats)
         add(frame, ex)
     return pd.concat(frames, ignore_index=True), exact
+
+
+def offset_blocks(y_c: float, *, geometry: Geometry = PROTOTYPE, params: Parameters = PAPER_PARAMETERS,
+                  durations: dict[str, float] | None = None, lane_s: float = 12.0) -> list:
+    """Exact equation blocks (model ``com_offset``) of the paper's sequence plus a lane change, with a chassis
+    centre of mass at ``(0, y_c)``: the torques of eq. (19) plus ``m_ch y_c`` times its column
+    (:func:`agvdyn.dynamics_extended.com_offset_forces`, projected). Only the car-like rows see ``y_c``."""
+    import dataclasses
+
+    from agvdyn.identification import equation_block
+    from agvdyn.model_spec import ModelSpec
+
+    durations = durations or {"steer_left": 6.0, "steer_right": 6.0, "straight": 6.0, "rotation": 6.0}
+    _, exact = identification_frame(durations, geometry=geometry, params=params)
+    t_end = float(exact[-1]["t"][-1])
+    exact.append(lane_change_frame(lane_s, geometry=geometry, params=params, t0=t_end + 2e-3)[1])
+    names = list(durations) + ["lane_change"]
+    model = ModelSpec(com_offset=True)
+    first_moments = np.array([0.0, params.m_ch * y_c])
+    out = []
+    for name, e in zip(names, exact):
+        b = equation_block(geometry, e["mode"], e["alpha"], e["q_dot"], e["q_ddot"], e["u"], t=e["t"],
+                           segment=name, source="exact", model=model)
+        out.append(dataclasses.replace(b, torque=b.torque + b.model_regressor @ first_moments))
+    return out

@@ -18,9 +18,9 @@ Scores of a candidate:
   more or less (a delay's interpolation at a stretch's end) do not count as evidence.
 * ``nrmse_holdout``: blocked cross-validation, leave-one-part-out. Each segment's rows (per log and
   label) are cut in ``parts`` contiguous parts in time; fold j refits without part j of every
-  segment (nor the rows within ``2 tau`` steps of it: correlated residuals would leak) and predicts
-  part j. Leaving out a whole segment label, as leave-one-segment-out would, is impossible on the
-  paper's sequence: each label is the only one that excites its parameters (Table 1). The NRMSE
+  segment (nor the rows within ``2 tau`` steps of it, at most half the part: correlated residuals leak,
+  a longer gap drops segments; :data:`.selection_rows.GAP_PART_FRACTION`) and predicts part j. Leaving out
+  a whole segment label is impossible on the paper's sequence: each excites its parameters (Table 1). The NRMSE
   ``RMS(measured - model) / RMS(measured)`` (:func:`agvdyn.validation.nrmse`) is pooled per
   ``segment:coordinate`` over the folds, on the kept rows, and averaged over the keys. The searched
   values (delay, Stribeck velocities) stay at the whole data's optimum in the folds.

@@ -38,10 +38,15 @@ from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
 
 __all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows",
            "bic_on_rows", "bic_parameter_count", "rows_parameter_count", "column_groups", "breakaway_evidence",
-           "determined_breakaway", "ROWS_CHOICES", "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE"]
+           "determined_breakaway", "ROWS_CHOICES", "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE", "GAP_PART_FRACTION"]
 
 #: Parts of each segment in the held-out error's cross-validation.
 HOLDOUT_PARTS = 4
+
+#: The largest gap (a fraction of the held part's length) between a held part and the training rows of its
+#: segment: with a correlation time of seconds (car-like logs: 3,500-9,900 steps, a gap of 15-40 s) the
+#: gap ``2 tau`` would take whole segments out of the training, and each fold's fit would extrapolate.
+GAP_PART_FRACTION = 0.5
 
 #: How ``auto`` compares two models: on the evidence rows of their difference, or on all rows (the
 #: rule before issue 30's delay fix; kept for the study's comparison).
@@ -201,9 +206,10 @@ def _parts(blocks: Sequence[EquationBlock], parts: int) -> dict[tuple[str, str],
 
 def _fold_masks(b: EquationBlock, span: tuple[float, float], fold: int, gap_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Rows of block ``b`` (n,) in part ``fold`` of its segment, and those the training may use
-    (outside the part by more than ``gap_s``)."""
+    (outside the part by more than ``gap_s``, at most :data:`GAP_PART_FRACTION` of the part's length)."""
     first, length = span
     start, stop = first + fold * length, first + (fold + 1) * length
+    gap_s = min(gap_s, GAP_PART_FRACTION * length)
     held = (b.t >= start) & (b.t < stop)
     distance = np.maximum(np.maximum(start - b.t, b.t - stop), 0.0)
     return held, ~held & (distance > gap_s)
