@@ -191,6 +191,30 @@ def assert_table_is_rosbags(raws: list[bytes]) -> None:
     assert (seen == 1).all()
 
 
+def test_a_publisher_mix_is_decoded_per_layout_without_rosbags():
+    """400 messages of five layouts (frame ids, names, array lengths, NaN efforts) as rosbags reads them,
+    rosbags' own decoder never called for little-endian messages."""
+    rng = np.random.default_rng(3)
+    layouts = [(["a", "bb"], 2, 2, "base"), (["steer_l", "steer_r", "w"], 3, 0, "base_link"),
+               (["a", "bb"], 2, 2, "odom"), (["x"], 1, 1, ""), (["a", "bb", "ccc"], 3, 3, "base")]
+    raws = []
+    for _ in range(400):
+        names, n_pos, n_eff, frame = layouts[int(rng.integers(len(layouts)))]
+        eff = rng.normal(size=n_eff)
+        eff[rng.random(n_eff) < 0.3] = np.nan
+        msg = JS(header=HEADER(stamp=TIME(sec=int(rng.integers(0, 2**31)), nanosec=int(rng.integers(0, 10**9))),
+                               frame_id=frame),
+                 name=names, position=rng.normal(size=n_pos), velocity=rng.normal(size=int(rng.integers(0, 2))),
+                 effort=eff)
+        raws.append(bytes(TS.serialize_cdr(msg, JOINT_STATE)))
+    calls = []
+    sizes = np.array([len(r) for r in raws], dtype=np.int64)
+    offsets = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
+    decode_joint_state_table(np.frombuffer(b"".join(raws), dtype=np.uint8), offsets, sizes, calls.append)
+    assert calls == []
+    assert_table_is_rosbags(raws)
+
+
 _float = st.floats(allow_nan=True, allow_infinity=True, width=64)
 
 

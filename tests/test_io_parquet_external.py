@@ -111,44 +111,6 @@ def test_reading_a_pandas_written_log_imports_no_pandas(tmp_path):
     assert len(LOG_COLUMNS) == 11
 
 
-def test_joint_states_decoded_together_equal_rosbags_one_by_one():
-    """agvdyn.io._cdr: groups of equal layout read with numpy, every other message by rosbags; the same bits."""
-    from rosbags.typesys import Stores, get_typestore
-
-    from agvdyn.io._cdr import decode_joint_states
-
-    ts = get_typestore(Stores.ROS2_HUMBLE)
-    js, header, stamp = (ts.types[n] for n in ("sensor_msgs/msg/JointState", "std_msgs/msg/Header",
-                                               "builtin_interfaces/msg/Time"))
-    rng = np.random.default_rng(3)
-    layouts = [(["a", "bb"], 2, 2, "base"), (["steer_l", "steer_r", "w"], 3, 0, "base_link"),
-               (["a", "bb"], 2, 2, "odom"), (["x"], 1, 1, ""), (["a", "bb", "ccc"], 3, 3, "base")]
-    raws = []
-    for k in range(400):
-        names, n_pos, n_eff, frame = layouts[int(rng.integers(len(layouts)))]
-        eff = rng.normal(size=n_eff)
-        eff[rng.random(n_eff) < 0.3] = np.nan
-        msg = js(header=header(stamp=stamp(sec=int(rng.integers(0, 2**31)), nanosec=int(rng.integers(0, 10**9))),
-                               frame_id=frame),
-                 name=names, position=rng.normal(size=n_pos), velocity=rng.normal(size=int(rng.integers(0, 2))),
-                 effort=eff)
-        raws.append(bytes(ts.serialize_cdr(msg, "sensor_msgs/msg/JointState")))
-    calls = []
-
-    def deserialize(raw):
-        calls.append(raw)
-        return ts.deserialize_cdr(raw, "sensor_msgs/msg/JointState")
-
-    got = decode_joint_states(raws, deserialize)
-    assert len(calls) < 30  # one per layout, not one per message
-    for k, raw in enumerate(raws):
-        ref = ts.deserialize_cdr(raw, "sensor_msgs/msg/JointState")
-        assert got.stamps[k] == ref.header.stamp.sec * 1_000_000_000 + ref.header.stamp.nanosec
-        assert got.names[k] == tuple(ref.name)
-        assert got.position[k].tobytes() == np.asarray(ref.position, dtype=float).tobytes()
-        assert got.effort[k].tobytes() == np.asarray(ref.effort, dtype=float).tobytes()
-
-
 def test_the_joint_state_types_of_the_reader_are_ros2_humbles():
     from rosbags.typesys import Stores, get_typestore
 

@@ -112,14 +112,14 @@ class RowStore:
         worker thread, say); the recordings are only referenced here. ``ties``: (column, free column)
         pairs, natural indices: the first column's values added to the second's (one parameter for both)."""
         free = list(free)
+        if ties:
+            return self._tied_jobs(free, theta_fixed, ties)
         w = len(theta_fixed)
         stored = np.arange(w) if self.columns is None else self.columns
         first = list(stored[:len(free)]) == free
         held = [i for i in range(w) if theta_fixed[stored[i]] != 0.0]
         values = theta_fixed[stored[held]]
         where = np.argsort(stored)[free] if not first else None
-        if ties:
-            return self._tied_jobs(free, theta_fixed, ties)
 
         def rows_of(p: _Packed) -> RecordingRows:
             y = p.rows[:, -1]

@@ -20,9 +20,9 @@ from __future__ import annotations
 import os
 from pathlib import Path, PurePath
 
-import numpy as np
 
 from agvdyn.io._mcap import StorageTopic, read_mcap_topic
+from agvdyn.io.sidecar import _LOADER
 
 __all__ = ["StorageTopic", "read_topic"]
 
@@ -70,12 +70,8 @@ def read_sqlite_topic(path: Path, topic: str) -> StorageTopic | None:
         db.close()
     if any(not isinstance(data, bytes) for _, _, data in found):
         return None
-    sizes = np.fromiter((len(data) for _, _, data in found), dtype=np.int64, count=len(found))
-    offsets = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64) if found else np.zeros(0, np.int64)
-    received = np.fromiter((t for _, t, _ in found), dtype=np.int64, count=len(found))
-    data = np.frombuffer(b"".join(data for _, _, data in found), dtype=np.uint8)
-    return StorageTopic(tuple((r[1], r[2]) for r in rows), tuple(r[3] for r in rows if r[1] == topic),
-                        data, offsets, sizes, received)
+    return StorageTopic.of_messages(tuple((r[1], r[2]) for r in rows), tuple(r[3] for r in rows if r[1] == topic),
+                                    [data for _, _, data in found], [t for _, t, _ in found])
 
 
 def _metadata(path: Path) -> tuple[list[Path], str, tuple[tuple[str, str], ...]] | None:
@@ -84,7 +80,7 @@ def _metadata(path: Path) -> tuple[list[Path], str, tuple[tuple[str, str], ...]]
     import yaml
 
     try:
-        info = yaml.load((path / "metadata.yaml").read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        info = yaml.load((path / "metadata.yaml").read_text(), Loader=_LOADER)
         meta = info["rosbag2_bagfile_information"]
         if meta["version"] > _METADATA_VERSION or (meta.get("compression_mode") or "").lower() not in ("", "none"):
             return None
@@ -117,13 +113,4 @@ def _read_directory(path: Path, topic: str) -> StorageTopic | None:
         if any(t not in types for name, t in part.connections if name == topic):
             return None
         parts.append(part)
-    sizes = [p.data.size for p in parts]
-    bases = np.cumsum([0] + sizes[:-1]).astype(np.int64)
-    empty = np.zeros(0, np.int64)
-    return StorageTopic(
-        connections, tuple("cdr" for name, _ in connections if name == topic),
-        np.concatenate([p.data for p in parts]) if parts else np.zeros(0, np.uint8),
-        np.concatenate([p.offsets + b for p, b in zip(parts, bases)]) if parts else empty,
-        np.concatenate([p.sizes for p in parts]) if parts else empty,
-        np.concatenate([p.received for p in parts]) if parts else empty,
-    )
+    return StorageTopic.joined(connections, tuple("cdr" for name, _ in connections if name == topic), parts)

@@ -25,8 +25,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from agvdyn.io._mcap import distinct
 
-__all__ = ["JointRows", "JointStateMessage", "JointStateTable", "JointStates", "decode_joint_state",
-           "decode_joint_state_table", "decode_joint_states"]
+__all__ = ["JointRows", "JointStateMessage", "JointStateTable", "decode_joint_state", "decode_joint_state_table"]
 
 _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
@@ -233,36 +232,6 @@ def decode_joint_state_table(data: np.ndarray, offsets: np.ndarray, sizes: np.nd
             out.add_one(k, ref.header.stamp.sec * 1_000_000_000 + ref.header.stamp.nanosec, ref.name,
                         ref.position, ref.effort)
     return out.table()
-
-
-@dataclass(frozen=True)
-class JointStates:
-    """Messages decoded one at a time, in bag order: header stamps (M,) int64 ns, joint names, position
-    and effort per message as serialized (the reference the table is tested against)."""
-
-    stamps: np.ndarray
-    names: list[tuple[str, ...]]
-    position: list[np.ndarray]
-    effort: list[np.ndarray]
-
-
-def decode_joint_states(raws: list[bytes], deserialize: Deserialize) -> JointStates:
-    """Decode messages one by one: our own decoder, rosbags (``deserialize``) for what it refuses."""
-    stamps, names, position, effort = np.zeros(len(raws), dtype=np.int64), [], [], []
-    for k, raw in enumerate(raws):
-        message = decode_joint_state(raw)
-        if message is None:
-            ref = deserialize(raw)
-            stamps[k] = ref.header.stamp.sec * 1_000_000_000 + ref.header.stamp.nanosec
-            names.append(tuple(ref.name))
-            position.append(np.asarray(ref.position, dtype=np.float64))
-            effort.append(np.asarray(ref.effort, dtype=np.float64))
-        else:
-            stamps[k] = message.stamp_ns
-            names.append(message.names)
-            position.append(message.position)
-            effort.append(message.effort)
-    return JointStates(stamps, names, position, effort)
 
 
 #: Layouts tried per message size before the rest of that size is decoded one message at a time

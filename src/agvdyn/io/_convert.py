@@ -3,7 +3,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping as MappingABC
 from dataclasses import dataclass
-
 from pathlib import Path
 
 import numpy as np
@@ -132,14 +131,15 @@ def check_coupling(signals: dict[str, np.ndarray], t: np.ndarray, mapping: LogMa
     return worst
 
 
-def converted_log(path: Path, t: np.ndarray, signals: dict[str, np.ndarray], segments: np.ndarray | None,
-                  conversion: dict, source: str, *, max_gap_samples: float, stop_tolerance: float) -> Log:
+def converted_log(path: Path, mapping: LogMapping, t: np.ndarray, signals: dict[str, np.ndarray],
+                  segments: np.ndarray | None, conversion: dict, *, max_gap_samples: float,
+                  stop_tolerance: float) -> Log:
     """The checked :class:`Log` of SI signals (headings dropped) and optional segment names, with
     ``conversion`` as its sidecar (rows clipped to the stops added): no DataFrame on the way."""
     columns = {"t": t, **{c: signals[c] for c in LOG_COLUMNS[1:]}}
     segment = None if segments is None else label_codes(segments)
-    lazy, clipped = checked_columns(columns, segment, source, max_gap_samples=max_gap_samples,
-                                    stop_tolerance=stop_tolerance)
+    lazy, clipped = checked_columns(columns, segment, f"{path} (converted with {mapping.path or 'mapping'})",
+                                    max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
     if any(clipped.values()):
         conversion["clipped_to_stops"] = dict(clipped)
     return Log.from_checked(path, lazy, {"conversion": conversion}, clipped)

@@ -63,6 +63,24 @@ class StorageTopic:
     sizes: np.ndarray
     received: np.ndarray
 
+    @classmethod
+    def of_messages(cls, connections, encodings, raws: list[bytes], received) -> "StorageTopic":
+        """The topic of messages given one by one (``raws``, receive times ``received``)."""
+        sizes = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+        return cls(connections, encodings, np.frombuffer(b"".join(raws), dtype=np.uint8), np.cumsum(sizes) - sizes,
+                   sizes, np.asarray(received, dtype=np.int64).reshape(-1))
+
+    @classmethod
+    def joined(cls, connections, encodings, parts: list["StorageTopic"]) -> "StorageTopic":
+        """The messages of ``parts`` one after the other (their bytes joined, offsets shifted)."""
+        if not parts:
+            empty = np.zeros(0, np.int64)
+            return cls(connections, encodings, np.zeros(0, np.uint8), empty, empty, empty)
+        bases = np.cumsum([0] + [p.data.size for p in parts[:-1]]).astype(np.int64)
+        return cls(connections, encodings, np.concatenate([p.data for p in parts]),
+                   np.concatenate([p.offsets + b for p, b in zip(parts, bases)]),
+                   np.concatenate([p.sizes for p in parts]), np.concatenate([p.received for p in parts]))
+
 
 @dataclass(frozen=True)
 class _ChunkIndex:
@@ -307,21 +325,15 @@ def _read(file, size: int, topic: str) -> StorageTopic:
         indexed += log_time.size
         inside = (log_time >= chunk.start) & (log_time <= chunk.end)  # rosbags' bounds of a chunk
         data, packed = _compact(records, offsets[inside], sizes[inside])
-        parts.append((log_time[inside], packed, sizes[inside], data))
+        parts.append(StorageTopic(connections, encodings, data, packed, sizes[inside], log_time[inside]))
     if indexed != sum(counts.get(c, 0) for c in ids):
         raise _Odd("message indexes and statistics disagree on the number of messages")
     return _merged(connections, encodings, parts)
 
 
-def _merged(connections, encodings, parts) -> StorageTopic:
+def _merged(connections, encodings, parts: list[StorageTopic]) -> StorageTopic:
     """The chunks' messages merged in rosbags' order: log time, then chunk offset, then record order."""
-    if not parts:
-        empty = np.zeros(0, np.int64)
-        return StorageTopic(connections, encodings, np.zeros(0, np.uint8), empty, empty, empty)
-    bases = np.cumsum([0] + [p[3].size for p in parts[:-1]])
-    received = np.concatenate([p[0] for p in parts])
-    offsets = np.concatenate([p[1] + b for p, b in zip(parts, bases)])
-    sizes = np.concatenate([p[2] for p in parts])
-    order = np.argsort(received, kind="stable")  # parts in chunk order, each in record order
-    data = np.concatenate([p[3] for p in parts])
-    return StorageTopic(connections, encodings, data, offsets[order], sizes[order], received[order])
+    whole = StorageTopic.joined(connections, encodings, parts)
+    order = np.argsort(whole.received, kind="stable")  # parts in chunk order, each in record order
+    return StorageTopic(connections, encodings, whole.data, whole.offsets[order], whole.sizes[order],
+                        whole.received[order])

@@ -123,10 +123,7 @@ def _read_raw_rosbags(path: Path, topic: str) -> StorageTopic:
                 raws.append(raw)
     except (ReaderError, FileNotFoundError) as exc:
         raise LogError(f"{path}: cannot be read as a ROS 2 bag (sqlite3 or MCAP): {exc}") from exc
-    sizes = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
-    offsets = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64) if raws else sizes
-    return StorageTopic(connections, ("cdr",) * len(conns), np.frombuffer(b"".join(raws), dtype=np.uint8), offsets, sizes,
-                        np.array(received, dtype=np.int64))
+    return StorageTopic.of_messages(connections, ("cdr",) * len(conns), raws, received)
 
 
 def _read_messages(path: Path, topic: str) -> _Messages:
@@ -338,5 +335,5 @@ def read_bag(
     }
     if coupling:
         conversion["coupling_max_deviation"] = coupling
-    return converted_log(path, t, signals, segments, conversion, f"{path} (converted with {mapping.path or 'mapping'})",
-                         max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
+    return converted_log(path, mapping, t, signals, segments, conversion, max_gap_samples=max_gap_samples,
+                         stop_tolerance=stop_tolerance)

@@ -147,8 +147,8 @@ def read_mapped_table(
     if coupling:
         conversion["coupling_max_deviation"] = coupling
     conversion["notes"] = notes
-    return converted_log(path, t, signals, segments, conversion, f"{path} (converted with {mapping.path or 'mapping'})",
-                         max_gap_samples=max_gap_samples, stop_tolerance=stop_tolerance)
+    return converted_log(path, mapping, t, signals, segments, conversion, max_gap_samples=max_gap_samples,
+                         stop_tolerance=stop_tolerance)
 
 
 def _check_time_unit(path: Path, mapping: LogMapping, nominal: float) -> None:
