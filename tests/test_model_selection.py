@@ -20,6 +20,7 @@ from agvdyn.identification.selection import (
     chosen_model,
     holdout_nrmse,
     information_bic,
+    versus,
 )
 from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
 
@@ -192,6 +193,25 @@ def test_auto_keeps_an_extension_only_when_bic_and_holdout_both_improve():
     worse = _score(stribeck.replace(delay="auto"), 75.0, 0.11)  # holdout worse than delay alone
     index, extended = chosen_model(scores, combine=lambda spec: worse)
     assert extended[index].model == delay
+
+
+def test_a_validation_log_votes_when_given():
+    """With a validation score on both, an extension that lowers BIC and held-out error but predicts the
+    validation log worse is not kept (the issue's "held-out NRMSE ... and on --validation LOG"); lower
+    there: kept; a paper model's score that is not a number does not vote, a candidate's does (against it)."""
+    paper, _, delay, _, _ = candidate_models()
+
+    def with_validation(score: ModelScore, value) -> ModelScore:
+        return dataclasses.replace(score, nrmse_validation=value)
+
+    base, ext = _score(paper, 100.0, 0.20), _score(delay, 80.0, 0.10)
+    assert chosen_model([base, ext])[0] == 1
+    assert chosen_model([with_validation(base, 0.010), with_validation(ext, 0.011)])[0] == 0
+    assert chosen_model([with_validation(base, 0.010), with_validation(ext, 0.009)])[0] == 1
+    assert chosen_model([with_validation(base, math.nan), with_validation(ext, 0.009)])[0] == 1
+    assert chosen_model([with_validation(base, 0.010), with_validation(ext, math.nan)])[0] == 0
+    note = versus(with_validation(ext, 0.011), with_validation(base, 0.010))
+    assert (note["nrmse_validation"], note["nrmse_validation_other"], note["better"]) == (0.011, 0.010, False)
 
 
 def _pieces(model: ModelSpec, ss: dict, held: dict, k: int, tau: float = 50.0, reference=None) -> ModelScore:
@@ -823,7 +843,7 @@ def test_an_extension_contradicting_itself_is_not_kept():
     models friction that drops at low rates): not kept; a negative level beyond 3 std is impossible."""
     from types import SimpleNamespace
 
-    from agvdyn.identification.selection import _rejected
+    from agvdyn.identification.model_fit import rejected_extension as _rejected
     from agvdyn.platform import PAPER_PARAMETERS
 
     std = {n: 0.01 for n in ("C_l", "d_vl", "d_cl", "m_ch")}

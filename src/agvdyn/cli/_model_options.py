@@ -191,6 +191,11 @@ def print_model(console, ident, selection=None) -> None:
         if ident.extra:
             print_items(console, "model parameters:", [f"{n} = {v:.5g} +- {_cell(ident.extra_std.get(n), 3)} "
                                                        f"{EXTRA_UNITS[n]}" for n, v in ident.extra.items()])
+        gained = getattr(ident, "search_std", {})
+        if gained:
+            most = sorted(gained, key=lambda n: -gained[n] / max(ident.std.get(n, ident.extra_std.get(n, 0.0)), 1e-300))
+            print_items(console, "std include the searched values' uncertainty (its share, largest first):",
+                        [f"{n} {_cell(gained[n], 2)}" for n in most[:4]])
     if selection is not None:
         print_selection(console, selection)
         chosen = selection.scores[selection.chosen]

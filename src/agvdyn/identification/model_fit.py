@@ -25,13 +25,14 @@ import numpy as np
 
 from agvdyn.identification.excitation import ExcitationCheck
 from agvdyn.identification.normal import RegressionData
+from agvdyn.identification.plausibility import implausible_parameters
 from agvdyn.identification.regression import Dependency
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, FRICTION_GROUPS, STRIBECK_NAMES, ModelSpec
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["UNOBSERVABLE", "hold_unobservable", "tie_unsupported", "with_unobservable", "extension_estimates",
            "breakaway_warnings", "unsupported_breakaway", "held_parameters", "MIN_SUPPORT_ROWS",
-           "noisy_extensions", "residual_sums", "linear_values"]
+           "noisy_extensions", "residual_sums", "linear_values", "rejected_extension"]
 
 
 #: The model's columns no data determine, and why: held at 0 with an unbounded interval and a warning,
@@ -217,3 +218,18 @@ def residual_sums(data: RegressionData, coef: np.ndarray) -> dict[str, tuple[flo
             r = P @ x
             rss[data.group_names.index(key[1])] += float(r @ r)
     return {name: (float(rss[i]), int(data.group_rows[i])) for i, name in enumerate(data.group_names)}
+
+
+def rejected_extension(ident: Any, plausibility: bool) -> str | None:
+    """Why an extension's fit cannot be kept: physically impossible values (``plausibility``,
+    :func:`.plausibility.implausible_parameters`), or breakaway levels below their sliding level by
+    more than 2 std (:func:`breakaway_warnings`: the Stribeck law then describes friction
+    that drops at low rates, no breakaway); None."""
+    values = {**{n: getattr(ident.parameters, n) for n in ident.std},
+              **{n: v for n, v in ident.extra.items() if n in BREAKAWAY_NAMES}}
+    refused = implausible_parameters(values, {**ident.std, **ident.extra_std})[0] if plausibility else []
+    if refused:
+        return "physically impossible estimates: " + ", ".join(f"{r.name} = {r.value:.4g} +- {r.std:.2g}"
+                                                                for r in refused)
+    below = breakaway_warnings(ident.extra, ident.extra_std, ident.parameters)
+    return None if not below else "no breakaway: " + "; ".join(w.split(": no breakaway")[0] for w in below)

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from agvdyn.identification.profile import Profile, profile_interval, profile_minimum, profile_std
+from agvdyn.identification.search_uncertainty import SearchSpread, searched_spread, with_spread
 from agvdyn.identification.settings import CHASSIS_COORDINATES, IdentificationSettings
 from agvdyn.io import LogFile
 from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
@@ -189,10 +190,11 @@ def searched_values(model: ModelSpec) -> dict[str, float]:
 
 
 def searched_intervals(found: SearchResult, objective: Callable[[ModelSpec, str], float], correlation_steps: float
-                       ) -> tuple[dict[str, float], tuple[str, ...], int]:
+                       ) -> tuple[dict[str, float], tuple[str, ...], int, dict[str, tuple[float, float]]]:
     """The std of each searched value (see the module docstring; ``inf`` on a bound or where the
-    profile does not rise by ``correlation_steps``), the warnings, and the evaluations added."""
-    stds, warnings, fits = {}, [], 0
+    profile does not rise by ``correlation_steps``), the warnings, the evaluations added, and each
+    value's interval (an end ``-inf`` / ``inf`` where the profile does not rise enough)."""
+    stds, warnings, fits, intervals = {}, [], 0, {}
     values = searched_values(found.model)
     for name, profile in found.profiles.items():
         def one(x: float, name: str = name) -> float:
@@ -200,6 +202,7 @@ def searched_intervals(found: SearchResult, objective: Callable[[ModelSpec, str]
 
         interval, grown = profile_interval(profile, correlation_steps, one)
         fits += grown.fits - profile.fits
+        intervals[name] = interval
         unit = "s" if name == DELAY else "rad/s"
         bound = grown.on_bound()
         stds[name] = math.inf if bound is not None else profile_std(interval)
@@ -213,7 +216,7 @@ def searched_intervals(found: SearchResult, objective: Callable[[ModelSpec, str]
             warnings.append(f"model: {name} = {values[name]:.4g} {unit}: the profile of the residual does not rise "
                             f"enough within ({lo:g}, {hi:g}) {unit} on both sides: the data do not determine it "
                             "(std unbounded)")
-    return stds, tuple(warnings), fits
+    return stds, tuple(warnings), fits, intervals
 
 
 def correlation_steps(ident: Any, refit: Callable[[], Any]) -> float:
@@ -252,6 +255,8 @@ class ModelFit:
     fits: int
     stds: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    spread: SearchSpread = field(default_factory=SearchSpread)
+    intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, fixed: Mapping[str, float] | None = None,
@@ -291,9 +296,12 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
     final = identify(items, geometry, settings=settings, keep_blocks=keep_blocks, model=found.model, **options)
     hac = functools.partial(search_fit, items, geometry, found.model, settings, uncertainty="hac", **options)
     steps = correlation_steps(final, hac)
-    stds, warnings, fits = searched_intervals(found, objective, steps)
-    made = found.fits + fits + 1 + (final.uncertainty.correlation_time_steps is None)
-    return ModelFit(with_searched(final, stds, warnings), made, stds, warnings)
+    stds, warnings, fits, intervals = searched_intervals(found, objective, steps)
+    values = searched_values(found.model)
+    spread = searched_spread(final, values, intervals, {n: p.bounds for n, p in found.profiles.items()},
+                             lambda at: search_fit(items, geometry, _resolved(found.model, at), settings, **options))
+    made = found.fits + fits + spread.fits + 1 + (final.uncertainty.correlation_time_steps is None)
+    return ModelFit(with_searched(final, stds, warnings, spread), made, stds, warnings, spread, intervals)
 
 
 def search_fit(items: Sequence[Any], geometry: Any, model: ModelSpec, settings: IdentificationSettings, *,
@@ -314,11 +322,13 @@ def search_fit(items: Sequence[Any], geometry: Any, model: ModelSpec, settings: 
     return fit_blocks(blocks, geometry, fixed=fixed, settings=quick, estimator=estimator, model=model)
 
 
-def with_searched(ident: Any, stds: Mapping[str, float], warnings: Sequence[str]) -> Any:
+def with_searched(ident: Any, stds: Mapping[str, float], warnings: Sequence[str],
+                  spread: SearchSpread = SearchSpread()) -> Any:
     """The identification with the searched values' std (Stribeck velocities in ``extra_std``, the
-    delay's ``delay_std_s``) and the search's warnings."""
+    delay's ``delay_std_s``), the search's warnings and the estimates' ``spread`` over the searched
+    values' intervals in their std (:func:`.search_uncertainty.with_spread`: may refuse)."""
     extra_std = {**ident.extra_std, **{n: s for n, s in stds.items() if n in STRIBECK_NAMES}}
     changes: dict[str, Any] = {"extra_std": extra_std, "warnings": ident.warnings + tuple(warnings)}
     if DELAY in stds:
         changes["delay_std_s"] = stds[DELAY]
-    return dataclasses.replace(ident, **changes)
+    return with_spread(dataclasses.replace(ident, **changes), spread)

@@ -105,6 +105,8 @@ class Identification:
         spec gives them, no std unless a search sets one); ``delay_std_s``: the std of the delay when a
         search found it (None: given).
     residual_ss : ``{coordinate group: (residual sum of squares, rows)}`` over the kept rows.
+    search_std : with a searched delay or Stribeck velocity, the std each parameter's ``std`` includes
+        for the searched values' uncertainty (:mod:`.search_uncertainty`; JSON ``std_search``).
     """
 
     parameters: Parameters
@@ -141,6 +143,8 @@ class Identification:
     extra_std: dict[str, float] = field(default_factory=dict)
     delay_std_s: float | None = None
     residual_ss: dict[str, tuple[float, int]] = field(default_factory=dict)
+    #: what the searched values' uncertainty added to each std (:mod:`.search_uncertainty`)
+    search_std: dict[str, float] = field(default_factory=dict)
 
     def ci95(self, name: str) -> tuple[float, float] | None:
         """95 % interval ``value +- q std`` of an estimated parameter (q: Student's t of the
@@ -176,6 +180,8 @@ class Identification:
                 entry["std_classic"] = self.std_classic.get(n) if bounded else None
                 entry["std"] = self.std[n] if bounded else None
                 entry["identified"] = bounded
+                if n in self.search_std:
+                    entry["std_search"] = self.search_std[n]
             out[n] = entry
         for n in EXTRA_NAMES:  # the model's parameters beyond the paper's, when it has them
             if n in self.extra:
@@ -184,6 +190,8 @@ class Identification:
                     bounded = math.isfinite(self.extra_std[n])
                     entry.update(std=self.extra_std[n] if bounded else None,
                                  ci95=list(self.ci95(n)) if bounded else [None, None], identified=bounded)
+                    if n in self.search_std:
+                        entry["std_search"] = self.search_std[n]
                 out[n] = entry
         return out
 

@@ -37,7 +37,8 @@ The Stribeck law likewise on the rows of the joint groups whose breakaway level 
 those rows (:func:`.selection_rows.rows_parameter_count`).
 
 ``auto`` (:func:`chosen_model`): an extension passes when it lowers both the BIC and the held-out
-error of the paper's model on their comparison rows and none of its parameters is undetermined (std
+error of the paper's model on their comparison rows, and with a validation log its validation score
+(the log votes), and none of its parameters is undetermined (std
 ``inf``, or above ``max_relative_std`` of the value for the breakaway levels and the paper's parameters)
 or implausible; several passing ones are combined and the combination is kept only when it lowers both
 again against the best single one (the largest BIC gain over the paper's), on their comparison rows.
@@ -54,7 +55,7 @@ import numpy as np
 
 from agvdyn.identification.equations import EquationBlock
 from agvdyn.identification.fit import fit_blocks
-from agvdyn.identification.model_fit import breakaway_warnings, held_parameters, linear_values
+from agvdyn.identification.model_fit import held_parameters, linear_values, rejected_extension
 from agvdyn.identification.model_search import (
     DELAY,
     ModelFit,
@@ -66,7 +67,7 @@ from agvdyn.identification.model_search import (
     searched_values,
     with_searched,
 )
-from agvdyn.identification.plausibility import ImplausibleError, implausible_parameters
+from agvdyn.identification.plausibility import ImplausibleError
 from agvdyn.identification.regression import UnidentifiableError
 from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, bic_parameter_count,
                                                   column_groups, comparison_rows, determined_breakaway,
@@ -187,20 +188,26 @@ class ModelScore:
 def versus(a: ModelScore, b: ModelScore, rows: str = "evidence") -> dict[str, Any]:
     """The comparison of ``a`` with ``b``: the ``rows`` (coordinate groups, or ``"all"``;
     :func:`.selection_rows.comparison_rows` when ``rows`` is ``"evidence"``), both BICs and held-out
-    errors on them, and whether ``a`` lowers both (and is usable)."""
+    errors on them, both validation scores (None without a validation log), and whether ``a`` lowers
+    the BIC, the held-out error and, when both have one, the validation score (and is usable)."""
     if rows not in ROWS_CHOICES:
         raise ValueError(f"rows={rows!r}: expected one of {list(ROWS_CHOICES)}")
     friction = determined_breakaway((a if a.model.stribeck else b).identification)  # its evidence rows
     ss = b.residual_ss or a.residual_ss
     groups = comparison_rows(a.model, b.model, ss, friction) if rows == "evidence" else None
     (bic, holdout), (bic_b, holdout_b) = a.on_rows(groups), b.on_rows(groups)
+    valid, valid_b = a.nrmse_validation, b.nrmse_validation
+    # the validation log votes when given (not when the paper model's score is not a number)
+    validated = valid is None or valid_b is None or not math.isfinite(valid_b) or valid < valid_b
     return {"rows": "all" if groups is None else list(groups), "bic": bic, "bic_other": bic_b,
             "nrmse_holdout": holdout, "nrmse_holdout_other": holdout_b,
-            "better": a.usable and math.isfinite(bic) and bic < bic_b and holdout < holdout_b}
+            "nrmse_validation": valid, "nrmse_validation_other": valid_b,
+            "better": a.usable and math.isfinite(bic) and bic < bic_b and holdout < holdout_b and validated}
 
 
 def _better(a: ModelScore, b: ModelScore, rows: str = "evidence") -> bool:
-    """``a`` lowers both the BIC and the held-out error of ``b`` on their comparison rows (and is usable)."""
+    """``a`` lowers the BIC and the held-out error of ``b`` on their comparison rows, and its validation
+    score when both have one (and is usable)."""
     return bool(versus(a, b, rows)["better"])
 
 
@@ -299,21 +306,6 @@ def _undetermined(model: ModelSpec, ident: Any, limit: float) -> tuple[str, ...]
     return tuple(out + weak)
 
 
-def _rejected(ident: Any, plausibility: bool) -> str | None:
-    """Why an extension's fit cannot be kept: physically impossible values (``plausibility``,
-    :func:`.plausibility.implausible_parameters`), or breakaway levels below their sliding level by
-    more than 2 std (:func:`.model_fit.breakaway_warnings`: the Stribeck law then describes friction
-    that drops at low rates, no breakaway); None."""
-    values = {**{n: getattr(ident.parameters, n) for n in ident.std},
-              **{n: v for n, v in ident.extra.items() if n in BREAKAWAY_NAMES}}
-    refused = implausible_parameters(values, {**ident.std, **ident.extra_std})[0] if plausibility else []
-    if refused:
-        return "physically impossible estimates: " + ", ".join(f"{r.name} = {r.value:.4g} +- {r.std:.2g}"
-                                                                for r in refused)
-    below = breakaway_warnings(ident.extra, ident.extra_std, ident.parameters)
-    return None if not below else "no breakaway: " + "; ".join(w.split(": no breakaway")[0] for w in below)
-
-
 @dataclass(frozen=True, eq=False)
 class _Scoring:
     """What every candidate is scored with: the logs and the fit's keywords, the paper model's
@@ -344,7 +336,7 @@ class _Scoring:
         ident = fit.identification
         self.found[model] = ({n: v for n, v in searched_values(ident.model).items() if n in added_parameters(model)},
                              fit)
-        error = _rejected(ident, settings.fit.plausibility)
+        error = rejected_extension(ident, settings.fit.plausibility)
         k = bic_parameter_count(model, ident)
         bic, j, _ = information_bic(ident.residual_ss, k, self.steps, self.reference)
         rss, rows = (sum(v) for v in zip(*ident.residual_ss.values()))
@@ -369,7 +361,7 @@ class _Scoring:
 
         fit = self.found[score.model][1]
         ident = identify(self.logs, self.geometry, keep_blocks=True, model=score.fitted, **self.options)
-        return dataclasses.replace(score, identification=with_searched(ident, fit.stds, fit.warnings),
+        return dataclasses.replace(score, identification=with_searched(ident, fit.stds, fit.warnings, fit.spread),
                                    fits=score.fits + 1)
 
 

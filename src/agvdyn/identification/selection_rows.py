@@ -246,6 +246,8 @@ def comparison_note(versus: Mapping[str, Any] | None) -> str:
     def num(x: Any, fmt: str) -> str:
         return "-" if x is None or not math.isfinite(x) else format(x, fmt)
 
+    valid = ("" if versus.get("nrmse_validation") is None or versus.get("nrmse_validation_other") is None else
+             f", validation {num(versus['nrmse_validation'], '.4g')} vs {num(versus['nrmse_validation_other'], '.4g')}")
     return (f"against the paper's model on the {', '.join(versus['rows'])} rows: BIC {num(versus['bic'], '.1f')} "
             f"vs {num(versus['bic_other'], '.1f')}, held-out {num(versus['nrmse_holdout'], '.4g')} vs "
-            f"{num(versus['nrmse_holdout_other'], '.4g')}")
+            f"{num(versus['nrmse_holdout_other'], '.4g')}{valid}")
