@@ -195,23 +195,20 @@ def test_auto_keeps_an_extension_only_when_bic_and_holdout_both_improve():
     assert extended[index].model == delay
 
 
-def test_a_validation_log_votes_when_given():
-    """With a validation score on both, an extension that lowers BIC and held-out error but predicts the
-    validation log worse is not kept (the issue's "held-out NRMSE ... and on --validation LOG"); lower
-    there: kept; a paper model's score that is not a number does not vote, a candidate's does (against it)."""
+def test_a_validation_log_is_shown_not_voting():
+    """The validation scores are in the comparison (``versus``) but do not decide: one validation log ranks
+    two models by all their errors (docs/identification.md: a real delay lost there on 4/10 seeds)."""
     paper, _, delay, _, _ = candidate_models()
 
     def with_validation(score: ModelScore, value) -> ModelScore:
         return dataclasses.replace(score, nrmse_validation=value)
 
     base, ext = _score(paper, 100.0, 0.20), _score(delay, 80.0, 0.10)
-    assert chosen_model([base, ext])[0] == 1
-    assert chosen_model([with_validation(base, 0.010), with_validation(ext, 0.011)])[0] == 0
-    assert chosen_model([with_validation(base, 0.010), with_validation(ext, 0.009)])[0] == 1
-    assert chosen_model([with_validation(base, math.nan), with_validation(ext, 0.009)])[0] == 1
-    assert chosen_model([with_validation(base, 0.010), with_validation(ext, math.nan)])[0] == 0
+    for value in (0.009, 0.011, math.nan):
+        assert chosen_model([with_validation(base, 0.010), with_validation(ext, value)])[0] == 1
     note = versus(with_validation(ext, 0.011), with_validation(base, 0.010))
-    assert (note["nrmse_validation"], note["nrmse_validation_other"], note["better"]) == (0.011, 0.010, False)
+    assert (note["nrmse_validation"], note["nrmse_validation_other"], note["better"]) == (0.011, 0.010, True)
+    assert chosen_model([with_validation(base, 0.010), with_validation(_score(delay, 101.0, 0.10), 0.001)])[0] == 0
 
 
 def _pieces(model: ModelSpec, ss: dict, held: dict, k: int, tau: float = 50.0, reference=None) -> ModelScore:
