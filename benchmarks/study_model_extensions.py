@@ -1,4 +1,4 @@
-"""Acceptance study of the model beyond the paper (issue 30) on our plant.
+"""Acceptance study of the model beyond the paper (issue 30) on our plant and on the MuJoCo plant.
 
 For each seed and case (an effect of :mod:`agvdyn.model_spec` simulated on our plant) the
 identification experiment is simulated with the effect (seed S; the cases with a payload also the
@@ -18,7 +18,13 @@ Recorded per fit: the error of the paper's 10 parameters against the sidecar's t
 the effect's recovery (delay in sample periods, y_c in cm -- x_c cancels in every motion mode and is
 held at 0 with an infinite std --, the breakaway levels d_s in %), auto's choice with every candidate's
 scores, and the lane-change NRMSE of each fit. ``--plant ideal``: the simulator's ideal plant (tyre
-slip only) instead of its defaults; ``--rows stick-slip``: every fit with the rows for stick-slip logs
+slip only) instead of its defaults; ``--plant mujoco``: the MuJoCo plant (``simulate(engine="mujoco")``,
+the MJCF generated from the default platform and the true parameters; the truth of the errors is the
+MuJoCo vehicle's lumped parameters as the log's sidecar gives them, checked against
+``SimulationResult.true_model``; no breakaway cases, ``all`` included: MuJoCo's joint friction is its
+dry ``frictionloss``). ``--delay-probe``: on the effect-free cases also a delay fit searched over
+:data:`PROBE_RANGE` (negative delays included: the apparent delay of a log without one, the offset
+a real delay is found with); ``--rows stick-slip``: every fit with the rows for stick-slip logs
 (docs/identification.md, "Breakaway friction"; ``auto`` then with the Stribeck fit's ``stiction_threshold``
 0.005 for every candidate, the paper's included: the rows reach into the Stribeck range). Records go to
 ``--records`` (JSON lines, one per seed, case, plant and rows; a later one replaces an earlier one), so
@@ -48,19 +54,22 @@ from agvdyn.identification import (IdentificationSettings, ImplausibleError, Uni
                                    identify, identify_model)
 from agvdyn.identification.selection import chosen_model
 from agvdyn.io import load_logs
+from agvdyn.io.log import read_sidecar
 from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.simulation import simulate
 from agvdyn.validation import validate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from study_model_extensions_cases import (CASES, ESTIMATED, STRIBECK, Case, checks, read_records,  # noqa: E402
-                                          reference_case, render)
+from study_model_extensions_cases import (CASES, ENGINES, ESTIMATED, PLANTS, STRIBECK, Case, checks,  # noqa: E402
+                                          plant_refusal, read_records, reference_case, render)
 
 #: The rows of the fits: the defaults, or those for stick-slip logs (benchmarks/study_breakaway.py,
 #: docs/identification.md "Breakaway friction"; the Stribeck model also with stiction_threshold 0.005).
 ROWS = {"default": {}, "stick-slip": dict(filtering="matched", steering_guard=12.0)}
 #: Seed offsets of the car-like and the lane-change logs.
 CAR_LIKE_SEED, LANE_SEED = 1000, 2000
+#: The delay range (s) of ``--delay-probe``: both signs, 5 sample periods below 0, 10 above.
+PROBE_RANGE = (-0.01, 0.02)
 
 
 def _finite(x: Any) -> float | None:
@@ -69,15 +78,27 @@ def _finite(x: Any) -> float | None:
 
 def simulated_logs(case: Case, seed: int, out: Path, name: str, plant: str) -> tuple[list, Any, Any]:
     """``(fit logs, lane-change log, truth)``: the logs written to ``out`` and loaded back (the CLI's path)."""
-    settings = case.settings(plant)
+    settings, engine = case.settings(plant), ENGINES[plant]
     name = f"{name}_{plant}"
-    result = simulate("identification", settings=settings, seed=seed)
+    result = simulate("identification", settings=settings, seed=seed, engine=engine)
     paths = [result.write(out / f"seed{seed}_{name}.parquet")]
     if case.car_like:
-        paths.append(simulate("car-like", settings=settings, seed=CAR_LIKE_SEED + seed)
+        paths.append(simulate("car-like", settings=settings, seed=CAR_LIKE_SEED + seed, engine=engine)
                      .write(out / f"seed{seed}_{name}_carlike.parquet"))
-    lane = simulate("lane-change", settings=settings, seed=LANE_SEED + seed).write(out / f"seed{seed}_{name}_lane.parquet")
-    return load_logs(paths), load_logs([lane])[0], result.true_model
+    lane = simulate("lane-change", settings=settings, seed=LANE_SEED + seed, engine=engine).write(
+        out / f"seed{seed}_{name}_lane.parquet")
+    return load_logs(paths), load_logs([lane])[0], checked_truth(result, paths[0], engine)
+
+
+def checked_truth(result: Any, path: Path, engine: str) -> Any:
+    """The log's true model (:attr:`SimulationResult.true_model`: on MuJoCo the vehicle's lumped
+    parameters), checked against the sidecar written beside ``path``: its engine and true parameters."""
+    side, truth = read_sidecar(path), result.true_model
+    written = {**truth.parameters.to_dict(), **truth.extra}
+    if side.get("engine") != engine or side.get("true_parameters") != written:
+        raise SystemExit(f"{path}: the sidecar's engine {side.get('engine')!r} and true_parameters "
+                         f"{side.get('true_parameters')} differ from the run's ({engine!r}, {written})")
+    return truth
 
 
 def lane_nrmse(lane: Any, model: Any, settings: IdentificationSettings) -> dict[str, float | None]:
@@ -156,19 +177,25 @@ def refused_or_lenient(fit: Callable[[IdentificationSettings], Any], settings: I
     return ident, {**fit_record(ident, truth, lane, time.perf_counter() - t0), "refused": refused}
 
 
-def run_one(seed: int, name: str, out: Path, compare: bool, plant: str, rows: str = "default") -> dict[str, Any]:
-    """One seed of one case: simulate, fit paper / extension / auto, record."""
+def run_one(seed: int, name: str, out: Path, compare: bool, plant: str, rows: str = "default",
+            probe: bool = False) -> dict[str, Any]:
+    """One seed of one case: simulate, fit paper / extension / auto (and the delay probe), record."""
     case = CASES[name]
-    if plant == "ideal" and case.breakaway is not None:
-        raise SystemExit(f"case {name}: breakaway friction needs the default plant's stick-slip (--plant default)")
+    if plant_refusal(case, plant) is not None:
+        raise SystemExit(f"case {name}: {plant_refusal(case, plant)}")
     logs, lane, truth = simulated_logs(case, seed, out, name, plant)
     rec: dict[str, Any] = {"seed": seed, "case": name, "plant": plant, "rows": rows, "sample_time": float(logs[0].sample_time),
-                           "true_delay_s": truth.delay_s, "fits": {}}
+                           "true_delay_s": truth.delay_s, "engine": ENGINES[plant],
+                           "true_parameters": {**truth.parameters.to_dict(), **truth.extra}, "fits": {}}
     base = fit_settings(rows)
     paper, rec["fits"]["paper"] = refused_or_lenient(lambda s: identify(logs, settings=s), base, truth, lane)
     if not case.extension.is_paper:
         _, rec["fits"]["extension"] = refused_or_lenient(
             lambda s: identify_model(logs, model=case.extension, settings=s), fit_settings(rows, case.extension),
+            truth, lane)
+    if probe and case.extension.is_paper:  # the apparent delay of a log without one
+        _, rec["fits"]["delay_probe"] = refused_or_lenient(
+            lambda s: identify_model(logs, model=ModelSpec(delay="auto", delay_range=PROBE_RANGE), settings=s), base,
             truth, lane)
     if compare:  # with the stick-slip rows also the Stribeck fit's stiction threshold: the rows reach its range
         settings = fit_settings(rows, STRIBECK)
@@ -193,8 +220,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", nargs="+", default=["1", "2"], help="sensor-noise seeds (N or LO-HI)")
     ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="effects")
-    ap.add_argument("--plant", choices=("default", "ideal"), default="default",
-                    help="the simulator's default plant or its ideal one (tyre slip only; no breakaway cases)")
+    ap.add_argument("--plant", choices=PLANTS, default="default",
+                    help="the simulator's default plant, its ideal one (tyre slip only) or the MuJoCo plant "
+                         "(engine mujoco); breakaway cases on the default plant only")
+    ap.add_argument("--delay-probe", action="store_true",
+                    help=f"effect-free cases: also a delay fit searched in {PROBE_RANGE} s (the apparent delay)")
     ap.add_argument("--rows", choices=list(ROWS), default="default",
                     help="the rows of every fit: default, or stick-slip (filtering matched, steering guard 12)")
     ap.add_argument("--out", type=Path, default=None, help="folder of the logs (default: a temporary one)")
@@ -206,6 +236,10 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="write every record and its checks as JSON")
     args = ap.parse_args()
     records = read_records(args.records)
+    refused = [f"{name}: {plant_refusal(CASES[name], args.plant)}" for name in args.cases
+               if plant_refusal(CASES[name], args.plant) is not None]
+    if refused and not args.report_only:
+        raise SystemExit(f"--plant {args.plant} cannot run these cases:\n  " + "\n  ".join(refused))
     if not args.report_only:
         with tempfile.TemporaryDirectory(prefix="agvdyn-study-") as tmp:
             out = args.out or Path(tmp)
@@ -214,7 +248,7 @@ def main() -> None:
                 for k, seed in enumerate(_seeds(args.seeds)):
                     t0 = time.perf_counter()
                     rec = run_one(seed, name, out, args.compare_seeds is None or k < args.compare_seeds, args.plant,
-                                  args.rows)
+                                  args.rows, args.delay_probe)
                     rec["wall_s"] = round(time.perf_counter() - t0, 1)
                     records[(seed, name, args.plant, args.rows)] = rec
                     ref = records.get((seed, reference_case(name), args.plant, args.rows))

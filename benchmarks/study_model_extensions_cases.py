@@ -45,7 +45,12 @@ class Case:
 
     def settings(self, plant: str = "default") -> SimulationSettings:
         """The simulation settings: the simulator's defaults (``plant="default"``: stick-slip, steering-unit
-        masses, torque limit, wheel radius errors) or its ideal plant (tyre slip only) with the effect."""
+        masses, torque limit, wheel radius errors), its ideal plant (tyre slip only), or the defaults for
+        the MuJoCo plant (``"mujoco"``: of the plant settings MuJoCo takes the wheel radius errors only),
+        with the effect."""
+        refusal = plant_refusal(self, plant)
+        if refusal is not None:
+            raise ValueError(refusal)
         s = SimulationSettings()
         if plant == "ideal":
             s = replace(s, plant=s.plant.ideal())
@@ -56,6 +61,26 @@ class Case:
         if self.payload is not None:
             s = replace(s, payload=(self.payload,))
         return s
+
+
+#: The plants of the study: our simulator's defaults, its ideal plant, and the MuJoCo plant (the
+#: MJCF generated from the default platform and the true parameters; ``simulate(engine="mujoco")``).
+PLANTS = ("default", "ideal", "mujoco")
+#: The ``simulate`` engine of each plant.
+ENGINES = {"default": "ours", "ideal": "ours", "mujoco": "mujoco"}
+
+
+def plant_refusal(case: Case, plant: str) -> str | None:
+    """Why ``case`` cannot run on ``plant`` (None when it can): breakaway friction is our default plant's
+    stick-slip law only (the ideal plant has none; MuJoCo's joint friction is its dry ``frictionloss``,
+    without a static level above the sliding one)."""
+    if plant not in PLANTS:
+        return f"plant {plant!r}: expected one of {list(PLANTS)}"
+    if case.breakaway is None or plant == "default":
+        return None
+    why = ("the ideal plant has no stick-slip" if plant == "ideal"
+           else "MuJoCo's joint friction is its dry frictionloss, without breakaway")
+    return f"breakaway friction runs on the default plant only ({why}): use --plant default"
 
 
 P150, P200 = box_payload(150.0, 0.15, -0.10), box_payload(200.0, 0.0, 0.20)
