@@ -71,16 +71,20 @@ ENGINES = {"default": "ours", "ideal": "ours", "mujoco": "mujoco"}
 
 
 def plant_refusal(case: Case, plant: str) -> str | None:
-    """Why ``case`` cannot run on ``plant`` (None when it can): breakaway friction is our default plant's
-    stick-slip law only (the ideal plant has none; MuJoCo's joint friction is its dry ``frictionloss``,
-    without a static level above the sliding one)."""
+    """Why ``case`` cannot run on ``plant`` (None when it can): breakaway friction needs a stick-slip law,
+    our default plant's or MuJoCo's (its dry ``frictionloss`` at the static level plus a Stribeck assist,
+    src/agvdyn/simulation/mujoco_friction.py); the ideal plant has none. On MuJoCo breakaway runs alone:
+    combined with the other effects (case ``all``) it is not yet studied there."""
     if plant not in PLANTS:
         return f"plant {plant!r}: expected one of {list(PLANTS)}"
     if case.breakaway is None or plant == "default":
         return None
-    why = ("the ideal plant has no stick-slip" if plant == "ideal"
-           else "MuJoCo's joint friction is its dry frictionloss, without breakaway")
-    return f"breakaway friction runs on the default plant only ({why}): use --plant default"
+    if plant == "ideal":
+        return "breakaway friction needs stick-slip (the ideal plant has none): use --plant default or mujoco"
+    if case.delay or case.payload is not None or case.car_like:
+        return ("breakaway friction with other effects is not studied on MuJoCo (breakaway alone runs there): "
+                "use --plant default")
+    return None
 
 
 P150, P200 = box_payload(150.0, 0.15, -0.10), box_payload(200.0, 0.0, 0.20)

@@ -102,7 +102,9 @@ def simulate(
                                                   "steering), w (wheels) or all: static level RATIO times "
                                                   "the sliding d_c, Stribeck velocity W_S rad/s (default: "
                                                   "the settings' stribeck_velocity); repeatable, later ones "
-                                                  "win; our plant with stiction only; sidecar: true_model."),
+                                                  "win; either engine (our plant with stiction; MuJoCo: "
+                                                  "static frictionloss plus a Stribeck assist, not on "
+                                                  "jacks); sidecar: true_model."),
     torque_delay: Optional[float] = typer.Option(None, "--torque-delay", help="Seconds the logged torque "
                                                  "columns lag the angles (>= 0; sub-sample delays "
                                                  "interpolated); the motion is unchanged; sidecar: "
@@ -192,10 +194,7 @@ def _effects(settings, breakaway: list[str], torque_delay: Optional[float], on_m
     from agvdyn.simulation.plant import parse_breakaway
 
     plant = settings.plant
-    if breakaway and on_mujoco:
-        raise fail(f"--breakaway {breakaway[0]!r}: runs on our plant only (--engine ours); MuJoCo's joint "
-                   "friction is the engine's")
-    if breakaway and plant.coulomb != "stiction":
+    if breakaway and not on_mujoco and plant.coulomb != "stiction":  # MuJoCo: its dry friction (mujoco_friction.py)
         raise fail(f"--breakaway {breakaway[0]!r}: needs the plant's stiction friction, not coulomb="
                    f"{plant.coulomb!r} (--ideal-plant or the settings file)")
     try:

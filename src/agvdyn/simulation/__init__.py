@@ -113,6 +113,10 @@ def simulate(
     ctrl_params = plant_params if controller_params is None else controller_params
     if traj.lifted and settings.payload:
         raise ValueError(f"experiment {traj.name!r}: payload events need the vehicle on the ground")
+    if traj.lifted and vehicle is not None and any(r != 1.0 for r, _ in settings.plant.group_breakaway()):
+        raise ValueError(f"experiment {traj.name!r} on MuJoCo: breakaway friction runs on the driving MuJoCo plant "
+                         "only (mujoco_friction.py), the lifted one has MuJoCo's dry friction: use engine='ours' "
+                         "or no breakaway")
     if traj.lifted and vehicle is not None:  # sec. 7 on MuJoCo: the chassis welded above the floor
         from agvdyn.simulation.mujoco_lifted import simulate_lifted_mujoco
 

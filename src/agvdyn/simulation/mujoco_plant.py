@@ -15,6 +15,11 @@ Slip scenario on MuJoCo: a friction patch lowers the friction of a wheel's floor
 priority, so MuJoCo uses its friction) while that wheel's contact point is on the patch, checked
 once per sample; bursts are added by the shared drive. No slip law: MuJoCo's contact solver decides
 how the wheels slip.
+
+Breakaway (Stribeck) friction (issue 30, mujoco_friction.py): with some group's breakaway ratio != 1
+the run's compiled model gets the static friction levels ``ratio d_c`` and a stiff friction
+constraint on those joints, and an assist along the motion in ``qfrc_applied`` before each sample's
+steps makes the sliding friction ``d_c + (d_s - d_c) exp(-(w/w_s)^2)``; the MJCF stays the vehicle's.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ from agvdyn.simulation import _kernels, _plant_kernels
 from agvdyn.simulation._kernels import drive_sample, patch_factors
 from agvdyn.simulation._plant_kernels import _TLIM, _jit
 from agvdyn.simulation._setup import desired_motion
+from agvdyn.simulation.mujoco_friction import breakaway_friction
 
 drop_stale_cache(__file__, _kernels.__file__, _plant_kernels.__file__)  # _begin_sample calls into both
 from agvdyn.simulation.mujoco_model import (
@@ -312,7 +318,9 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
     outputs; ``st.pos``/``st.vel`` carry the plant state in PLATFORM.md's coordinates). ``energy`` (N, 2)
     receives MuJoCo's kinetic and potential energy at each sample. Payload events
     (``settings.payload``; mujoco_payload.py) load a body welded to the chassis before their first
-    samples; their :class:`~agvdyn.simulation.payload.PayloadTruth` join ``truths``.
+    samples; their :class:`~agvdyn.simulation.payload.PayloadTruth` join ``truths``. Breakaway friction
+    (``settings.plant.group_breakaway()``, some ratio != 1): the static levels in the model's
+    frictionloss and a Stribeck assist before each sample's steps (mujoco_friction.py).
     """
     mujoco = _mujoco()
     load = None
@@ -324,12 +332,13 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
                              settings.sample_time, energy, [] if truths is None else truths)
     else:
         model = vehicle.model()
+    src = str(vehicle.source or "generated MJCF")
+    brk = breakaway_friction(model, settings.plant, src)  # static levels into the model; None: no breakaway
     data = mujoco.MjData(model)
     Ts = settings.sample_time
     substeps = sample_substeps(model, Ts)
     if model.jnt_qposadr[_id(model, "joint", "root", "model")] != 0:
         raise ValueError("MJCF: the free joint 'root' of the chassis must be the model's first joint")
-    src = str(vehicle.source or "generated MJCF")
     jq = {j: int(model.jnt_qposadr[_id(model, "joint", j, src)]) for j in ("steer_fl", "steer_fr")}
     jv = {j: int(model.jnt_dofadr[_id(model, "joint", j, src)]) for j in ("steer_fl", "steer_fr")}
     for w in WHEELS:
@@ -358,6 +367,8 @@ def mujoco_stepper(vehicle: MujocoVehicle, traj, settings, st, burst: np.ndarray
                           st.pos, st.vel, st.cstate, st.work, data.ctrl,
                           out["pos"], out["vel"], out["alpha"], out["beta"], out["cmd"], out["app"], out["meas"],
                           out["work"])
+            if brk is not None:  # the Stribeck assist at the sample's joint rates (mujoco_friction.py)
+                brk.assist(data.qvel, data.qfrc_applied)
             step_one(model, data)  # its forward pass computes the energy of the state at sample k
             energy[k, 0] = data.energy[1]
             energy[k, 1] = data.energy[0]

@@ -197,7 +197,8 @@ class SimulationResult:
         """The true model of the log (:class:`agvdyn.model_spec.ModelParameters`): the 11 parameters of
         the vehicle the log shows and the effects beyond the paper that are on.
 
-        * breakaway friction (our plant with stiction, some group's ratio != 1): ``friction="stribeck"``,
+        * breakaway friction (some group's ratio != 1; our plant with stiction, or MuJoCo's driving
+          plant, mujoco_friction.py): ``friction="stribeck"``,
           ``d_sl, d_sr, d_sw`` = ratio * d_c of the group, ``w_sl, w_sr, w_sw`` its Stribeck velocity;
         * a torque delay (``SensorSettings.torque_delay``): ``delay_s``;
         * a payload carried through the whole run (:attr:`whole_run_payload`): ``m_ch``, ``C_ch`` (about
@@ -207,8 +208,9 @@ class SimulationResult:
         """
         params, extra = self.plant_params, {}
         groups = self.settings.plant.group_breakaway()
-        stribeck = (self.engine == "ours" and self.settings.plant.coulomb == "stiction"
-                    and any(ratio != 1.0 for ratio, _ in groups))
+        has_breakaway = (self.settings.plant.coulomb == "stiction" if self.engine == "ours"
+                         else not self.lifted)  # MuJoCo: mujoco_friction.py (not on jacks, mujoco_lifted.py)
+        stribeck = has_breakaway and any(ratio != 1.0 for ratio, _ in groups)
         if stribeck:
             for (ratio, _), (name, (_, d_c)) in zip(groups, FRICTION_GROUPS.items()):
                 extra[f"d_s{name}"] = ratio * getattr(params, d_c)
