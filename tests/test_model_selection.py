@@ -281,6 +281,16 @@ def test_auto_compares_a_delay_with_the_paper_model_on_the_chassis_rows():
     # the same chassis gain too small for one parameter's penalty log(N_G / tau): the paper model stays
     scores[2] = _pieces(delay, {**worse_steering, "x_ch": (99.9, n), "gamma_ch": (99.9, n)}, held_delay, 15, tau)
     assert chosen_model(scores)[0] == 0
+    # ... and when all rows favour the delay there, auto says so (never a silent paper model); not otherwise
+    from agvdyn.identification.selection_rows import rows_disagree
+
+    better_all = _pieces(delay, {**base, "alpha_l": (8.0, n), "alpha_r": (8.0, n), "x_ch": (99.9, n),
+                                 "gamma_ch": (99.9, n)}, {**held, "steer_left:alpha_l": (0.8, 100.0)}, 15, tau)
+    on_all, on_chassis = versus(better_all, scores[0], "all"), versus(better_all, scores[0])
+    assert on_all["better"] and not on_chassis["better"] and chosen_model([scores[0], better_all])[0] == 0
+    note = rows_disagree("delay", on_all, on_chassis)
+    assert note.startswith("auto: delay lowers the BIC") and "x_ch, gamma_ch" in note and "--model" in note
+    assert rows_disagree("delay", on_chassis, on_chassis) is None and rows_disagree("delay", on_all, on_all) is None
     # a stribeck fit better on the steering rows only is compared on all rows (its evidence)
     scores[1] = _pieces(stribeck, {**base, "alpha_l": (9.0, n), "alpha_r": (9.0, n)},
                         {**held, "steer_left:alpha_l": (0.9, 100.0)}, 16, tau)

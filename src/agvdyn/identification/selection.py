@@ -75,7 +75,7 @@ from agvdyn.identification.regression import UnidentifiableError
 from agvdyn.identification.selection_rows import (HOLDOUT_PARTS, ROWS_CHOICES, bic_on_rows, bic_parameter_count,
                                                   column_groups, comparison_rows, determined_breakaway,
                                                   holdout_nrmse, holdout_of_sums, holdout_parts,
-                                                  rows_parameter_count)
+                                                  rows_disagree, rows_parameter_count)
 from agvdyn.identification.settings import DEFAULT_FIXED, IdentificationSettings
 from agvdyn.io import Log, LogFile
 from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, DELAY_RANGE, STRIBECK_NAMES, STRIBECK_RANGE, ModelSpec
@@ -407,4 +407,10 @@ def compare_models(logs: Any, platform: Any = None, *, validation: Callable[[Any
             scores[index] = dataclasses.replace(scores[index], error=f"refused with the settings: {exc}")
     scores = [dataclasses.replace(s, chosen=k == index, versus_paper=None if k == 0 or s.error is not None
                                   else versus(s, scores[0], rows)) for k, s in enumerate(scores)]
+    notes = tuple(w for s in scores[1:] if not s.chosen and s.versus_paper and s.model.extensions == ("delay",)
+                  and (w := rows_disagree(s.label, versus(s, scores[0], "all"), s.versus_paper)))
+    if notes:  # auto's choice carries it: the steering rows favour a delay the chassis rows do not confirm
+        ident = scores[index].identification
+        scores[index] = dataclasses.replace(scores[index], identification=dataclasses.replace(
+            ident, warnings=ident.warnings + notes))
     return ModelSelection(tuple(scores), index, steps, sum(reference.values()) / steps, parts)

@@ -38,7 +38,7 @@ from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
 
 __all__ = ["comparison_note", "holdout_nrmse", "holdout_parts", "holdout_sums", "holdout_of_sums", "comparison_rows",
            "bic_on_rows", "bic_parameter_count", "rows_parameter_count", "column_groups", "breakaway_evidence",
-           "determined_breakaway", "ROWS_CHOICES", "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE", "GAP_PART_FRACTION"]
+           "determined_breakaway", "rows_disagree", "ROWS_CHOICES", "HOLDOUT_PARTS", "BREAKAWAY_EVIDENCE", "GAP_PART_FRACTION"]
 
 #: Parts of each segment in the held-out error's cross-validation.
 HOLDOUT_PARTS = 4
@@ -251,3 +251,17 @@ def comparison_note(versus: Mapping[str, Any] | None) -> str:
     return (f"against the paper's model on the {', '.join(versus['rows'])} rows: BIC {num(versus['bic'], '.1f')} "
             f"vs {num(versus['bic_other'], '.1f')}, held-out {num(versus['nrmse_holdout'], '.4g')} vs "
             f"{num(versus['nrmse_holdout_other'], '.4g')}{valid}")
+
+
+def rows_disagree(label: str, all_rows: Mapping[str, Any], evidence: Mapping[str, Any] | None) -> str | None:
+    """A warning when an extension (``compare_models``: the delay) lowers the BIC and the held-out error of
+    the paper's model on all rows but not on its evidence rows (:func:`comparison_rows`; ``versus`` dicts of
+    both), else None: ``auto`` keeps the paper's model there, and the rows it did not judge by favour the
+    extension. (Not for the Stribeck law: its all-row gain is the undetermined steering levels' columns.)"""
+    if not all_rows.get("better") or not evidence or evidence.get("rows") == "all" or evidence.get("better"):
+        return None
+    return (f"auto: {label} lowers the BIC ({all_rows['bic']:.1f} vs {all_rows['bic_other']:.1f}) and the held-out "
+            f"error on all rows, not on its evidence rows ({', '.join(evidence['rows'])}: BIC {evidence['bic']:.1f} "
+            f"vs {evidence['bic_other']:.1f}), so it is not kept. The other rows favour it: where the steering joints "
+            "stick and slip, their rows read as a torque lead or lag; if your vehicle's steering friction does not, "
+            f"fit --model with {label} and compare (docs/identification.md, \"Like with like\")")
