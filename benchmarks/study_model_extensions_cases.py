@@ -73,17 +73,13 @@ ENGINES = {"default": "ours", "ideal": "ours", "mujoco": "mujoco"}
 def plant_refusal(case: Case, plant: str) -> str | None:
     """Why ``case`` cannot run on ``plant`` (None when it can): breakaway friction needs a stick-slip law,
     our default plant's or MuJoCo's (its dry ``frictionloss`` at the static level plus a Stribeck assist,
-    src/agvdyn/simulation/mujoco_friction.py); the ideal plant has none. On MuJoCo breakaway runs alone:
-    combined with the other effects (case ``all``) it is not yet studied there."""
+    src/agvdyn/simulation/mujoco_friction.py); the ideal plant has none."""
     if plant not in PLANTS:
         return f"plant {plant!r}: expected one of {list(PLANTS)}"
     if case.breakaway is None or plant == "default":
         return None
     if plant == "ideal":
         return "breakaway friction needs stick-slip (the ideal plant has none): use --plant default or mujoco"
-    if case.delay or case.payload is not None or case.car_like:
-        return ("breakaway friction with other effects is not studied on MuJoCo (breakaway alone runs there): "
-                "use --plant default")
     return None
 
 
