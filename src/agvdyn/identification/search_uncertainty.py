@@ -8,8 +8,9 @@ taken for 0 moves C_l by -7 %), so the std of a parameter ``p`` given the search
 
 with ``(x_lo, x_hi)`` the searched value's 68 % profile interval (:func:`.model_search.searched_intervals`)
 clipped to its search range: an end where the profile does not rise enough within the range is the
-range's bound (the user's range is all the data leave). One value-only fit at ``x`` and at each end
-(:func:`.model_search.search_fit`); several searched values add their spreads' squares. The
+range's bound (the user's range is all the data leave). One value-only fit at each end
+(:func:`.model_search.search_fit`: the final fit's values at ``x``, no refusals), against the final fit's
+values; several searched values add their spreads' squares. The
 correlation matrix gets ``v v^T`` per searched value (``v``: the spread, signed by the central
 difference). A std that then exceeds ``max_relative_std`` of its value (a centre-of-mass offset: the
 platform's half-diagonal) is refused by name, as the fit refuses one (``unexcited="report"``: a warning).
@@ -56,13 +57,14 @@ def searched_spread(ident: Any, values: Mapping[str, float], intervals: Mapping[
                     ) -> SearchSpread:
     """The spread of ``ident``'s estimated parameters (finite std; the searched values themselves left
     out) over each searched value's interval (``intervals``, clipped to ``bounds``; see the module
-    docstring). ``fit_at(values)``: a value-only fit with the searched values ``values``."""
+    docstring), ``ident`` the fit at ``values``. ``fit_at(values)``: a value-only fit with the searched
+    values ``values``."""
     names = tuple(n for n, s in {**ident.std, **ident.extra_std}.items()
                   if math.isfinite(s) and n not in STRIBECK_NAMES)
     if not names or not intervals:
         return SearchSpread()
-    centre = _estimates(fit_at(dict(values)), names)
-    fits, spread = 1, {}
+    centre = _estimates(ident, names)
+    fits, spread = 0, {}
     for name, (lo, hi) in intervals.items():
         x, (b_lo, b_hi) = values[name], bounds[name]
         ends = [min(max(e, b_lo), b_hi) for e in (lo, hi)]
