@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from agvdyn._jit import njit
+from agvdyn.simulation._arrow_solve import _arrow_solve
 
 # Indices of the constant vector handed to the compiled code.
 (_L, _B, _A, _R, _IG, _MB, _CB, _MU_MASS, _EU, _JUL, _JUR, _BW, _DVL, _DCL, _DVR, _DCR, _DVW, _DCW,
@@ -249,79 +250,71 @@ def _coulomb(c, v, d_c, group):
 
 
 @_jit_borrow
+def _slow_speed(c, d_c, inertia, dt):
+    """Speed below which one step of Coulomb friction could stop a joint (>= 3 stick velocities)."""
+    return max(2.0 * dt * d_c / inertia, 3.0 * c[_VSTICK])
+
+
+@_jit_borrow
 def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
     """Linearly-implicit friction of one joint of joint group ``group`` (:func:`_coulomb`):
     force = d * v_new + e.
 
     Fast joints use the tangent (Rosenbrock-Euler) linearisation, exact for a constant Coulomb
-    force; slow joints, which one step of friction could stop (|v| < 2 dt d_c / inertia), use the
+    force; slow joints, which one step of friction could stop (:func:`_slow_speed`), use the
     secant, which never flips the sign of v and holds a stuck joint.
     """
     f, sec, slope = _coulomb(c, v, d_c, group)
-    v_thr = max(2.0 * dt * d_c / inertia, 3.0 * c[_VSTICK])
-    if abs(v) < v_thr:
+    if abs(v) < _slow_speed(c, d_c, inertia, dt):
         return d_v + sec, 0.0
     return d_v + slope, f - slope * v
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
-def _into_chassis(K, rhs, k0, k1, k2, f0, f1, f2, y):  # pragma: no cover - compiled
-    """Eliminate one joint coupled to the chassis by ``(k0, k1, k2)`` (``f = k / pivot``, ``y`` its
-    right-hand side) from the chassis block of K's lower triangle and from rhs."""
-    K[0, 0] -= f0 * k0
-    K[1, 0] -= f1 * k0
-    K[1, 1] -= f1 * k1
-    K[2, 0] -= f2 * k0
-    K[2, 1] -= f2 * k1
-    K[2, 2] -= f2 * k2
-    rhs[0] -= f0 * y
-    rhs[1] -= f1 * y
-    rhs[2] -= f2 * y
+@_jit_borrow
+def _joint_constants(c, q):
+    """Group, viscous and Coulomb coefficient of joint q (3, 4: steering; 5-8: wheels)."""
+    if q < 5:
+        return (_GROUP_L, c[_DVL], c[_DCL]) if q == 3 else (_GROUP_R, c[_DVR], c[_DCR])
+    return _GROUP_W, c[_DVW], c[_DCW]
 
 
 @_jit_borrow
-def _arrow_solve(K, rhs):
-    """Solve K x = rhs in place for the plant's K (lower triangle read and overwritten); x in rhs.
+def _breakaway_tangents(c, vel, M, jf, dt):
+    """Stiction with breakaway (a group's ratio != 1): slow joints of those groups outside the stick band
+    take the tangent, not the secant ``level v_new / |v_old|``, which exceeds the level while a joint breaks
+    away and held joints until 7-20 % above it; returns them (bit q: joint q) for :func:`_secant_fallback`."""
+    slow = 0
+    if c[_COUL] != 0.0:
+        return slow
+    for q in range(3, 9):
+        group, d_v, d_c = _joint_constants(c, q)
+        v = vel[q]
+        if c[_RATIO + group] != 1.0 and c[_VSTICK] < abs(v) < _slow_speed(c, d_c, M[q, q], dt):
+            f, sec, slope = _coulomb(c, v, d_c, group)
+            jf[0, q], jf[1, q] = d_v + slope, f - slope * v
+            slow |= 1 << q
+    return slow
 
-    K is an arrow: each wheel (5-8) couples only to the chassis (0-2) and its steering side (3, 4),
-    each steering side only to the chassis. Eliminating the wheels, then the steering sides, then
-    the chassis block (LDL^T) makes no fill-in: about a third of the operations of a dense 9 x 9
-    Cholesky and a much shorter chain of dependent ones (K is symmetric positive definite: no pivoting).
-    """
-    for i in range(4):
-        p, a = 5 + i, 3 if i < 2 else 4
-        k0, k1, k2, ka = K[p, 0], K[p, 1], K[p, 2], K[p, a]
-        inv = 1.0 / K[p, p]
-        f0, f1, f2, fa = k0 * inv, k1 * inv, k2 * inv, ka * inv
-        y = rhs[p]
-        _into_chassis(K, rhs, k0, k1, k2, f0, f1, f2, y)
-        K[a, 0] -= fa * k0
-        K[a, 1] -= fa * k1
-        K[a, 2] -= fa * k2
-        K[a, a] -= fa * ka
-        rhs[a] -= fa * y
-    for a in range(3, 5):
-        k0, k1, k2 = K[a, 0], K[a, 1], K[a, 2]
-        inv = 1.0 / K[a, a]
-        _into_chassis(K, rhs, k0, k1, k2, k0 * inv, k1 * inv, k2 * inv, rhs[a])
-    # chassis block: LDL^T, forward and back substitution
-    d0 = K[0, 0]
-    l10, l20 = K[1, 0] / d0, K[2, 0] / d0
-    d1 = K[1, 1] - l10 * K[1, 0]
-    k21 = K[2, 1] - l20 * K[1, 0]
-    l21 = k21 / d1
-    d2 = K[2, 2] - l20 * K[2, 0] - l21 * k21
-    y1 = rhs[1] - l10 * rhs[0]
-    y2 = rhs[2] - l20 * rhs[0] - l21 * y1
-    x2 = y2 / d2
-    x1 = y1 / d1 - l21 * x2
-    x0 = rhs[0] / d0 - l10 * x1 - l20 * x2
-    rhs[0], rhs[1], rhs[2] = x0, x1, x2
-    for a in range(3, 5):
-        rhs[a] = (rhs[a] - K[a, 0] * x0 - K[a, 1] * x1 - K[a, 2] * x2) / K[a, a]
-    for i in range(4):
-        p, a = 5 + i, 3 if i < 2 else 4
-        rhs[p] = (rhs[p] - K[p, 0] * x0 - K[p, 1] * x1 - K[p, 2] * x2 - K[p, a] * rhs[a]) / K[p, p]
+
+@_jit_borrow
+def _secant_fallback(c, vel, K, rhs, M, h, jf, slow, dt):
+    """Re-solve the step where a joint of :func:`_breakaway_tangents` flipped the sign of its velocity:
+    those joints take the secant. ``M``, ``h`` hold K's lower triangle and rhs as before the first solve."""
+    redo = False
+    for q in range(3, 9):
+        if (slow >> q) & 1 and rhs[q] * vel[q] < 0.0:
+            group, d_v, d_c = _joint_constants(c, q)
+            sec = _coulomb(c, vel[q], d_c, group)[1]
+            M[q, q] += dt * (d_v + sec - jf[0, q])
+            h[q] += dt * jf[1, q]
+            jf[0, q], jf[1, q] = d_v + sec, 0.0
+            redo = True
+    for p in range(9 if redo else 0):
+        rhs[p] = h[p]
+        for q in range(p + 1):
+            K[p, q] = M[p, q]
+    if redo:
+        _arrow_solve(K, rhs)
 
 
 @_jit
@@ -364,10 +357,10 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         dvec[4 + i] = d_long * g
     # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
     _iteration_matrix(M, A, dvec, dt, K)
-    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
-    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
-    for i in range(4):
-        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
+    for q in range(3, 9):
+        group, d_v, d_c = _joint_constants(c, q)
+        jf[0, q], jf[1, q] = _friction_terms(c, vel[q], d_v, d_c, group, M[q, q], dt)
+    slow = _breakaway_tangents(c, vel, M, jf, dt)
     for q in range(3, 9):
         K[q, q] += dt * jf[0, q]
     # right-hand side M v - dt h + dt B u (+ stops); M is zero outside 0-4 but on the diagonal
@@ -389,7 +382,14 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         if pen != 0.0:
             K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
             rhs[3 + j] -= dt * c[_KSTOP] * pen
+    if slow:  # keep K's lower triangle and rhs (M and h are not read after this)
+        for p in range(9):
+            h[p] = rhs[p]
+            for q in range(p + 1):
+                M[p, q] = K[p, q]
     _arrow_solve(K, rhs)
+    if slow:
+        _secant_fallback(c, vel, K, rhs, M, h, jf, slow, dt)
     # energy accounts at the new velocities
     p_motor = 0.0
     for i in range(4):
