@@ -284,7 +284,7 @@ def _breakaway_tangents(c, vel, M, jf, dt):
     take the tangent, not the secant ``level v_new / |v_old|``, which exceeds the level while a joint breaks
     away and held joints until 7-20 % above it; returns them (bit q: joint q) for :func:`_secant_fallback`."""
     slow = 0
-    if c[_COUL] != 0.0:
+    if c[_COUL] != 0.0 or c[_RATIO] == c[_RATIO + 1] == c[_RATIO + 2] == 1.0:
         return slow
     for q in range(3, 9):
         group, d_v, d_c = _joint_constants(c, q)
@@ -357,9 +357,10 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         dvec[4 + i] = d_long * g
     # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
     _iteration_matrix(M, A, dvec, dt, K)
-    for q in range(3, 9):
-        group, d_v, d_c = _joint_constants(c, q)
-        jf[0, q], jf[1, q] = _friction_terms(c, vel[q], d_v, d_c, group, M[q, q], dt)
+    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
+    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
+    for i in range(4):
+        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
     slow = _breakaway_tangents(c, vel, M, jf, dt)
     for q in range(3, 9):
         K[q, q] += dt * jf[0, q]
