@@ -75,8 +75,11 @@ def run_lifted_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res, u_ff, bet
         for i in range(4):
             for j in range(substeps):
                 v = vel[5 + i]
-                d, f0 = _friction_terms(c, v, c[_DVW], c[_DCW], _GROUP_W, bw, dt)
+                d, f0, tangent = _friction_terms(c, v, c[_DVW], c[_DCW], _GROUP_W, bw, dt)
                 v_new = (bw * v + dt * (c[_IG] * ua[i] - f0)) / (bw + dt * d)
+                if tangent and v_new * v < 0.0:  # the secant where the tangent reverses a slow wheel
+                    d, f0 = d + f0 / v, 0.0  # d_v + F(v) / v
+                    v_new = (bw * v + dt * c[_IG] * ua[i]) / (bw + dt * d)
                 work[0] += dt * c[_IG] * ua[i] * v_new
                 work[1] += dt * (d * v_new + f0) * v_new
                 pos[5 + i] += dt * v_new

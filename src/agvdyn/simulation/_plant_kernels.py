@@ -258,16 +258,22 @@ def _slow_speed(c, d_c, inertia, dt):
 @_jit_borrow
 def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
     """Linearly-implicit friction of one joint of joint group ``group`` (:func:`_coulomb`):
-    force = d * v_new + e.
+    force = d * v_new + e; the third value is 1 where a slow joint took the tangent.
 
     Fast joints use the tangent (Rosenbrock-Euler) linearisation, exact for a constant Coulomb
-    force; slow joints, which one step of friction could stop (:func:`_slow_speed`), use the
-    secant, which never flips the sign of v and holds a stuck joint.
+    force; slow joints, which one step of friction could stop (:func:`_slow_speed`), the secant,
+    which never flips the sign of v and holds a stuck joint. With stiction, a slow joint outside the
+    stick band takes the tangent too (the caller falls back to the secant where it reverses the
+    joint): the secant ``level v_new / |v_old|`` exceeds the level while a joint breaks away (v grows)
+    and held joints until their torque was 7-20 % above the level.
     """
     f, sec, slope = _coulomb(c, v, d_c, group)
-    if abs(v) < _slow_speed(c, d_c, inertia, dt):
-        return d_v + sec, 0.0
-    return d_v + slope, f - slope * v
+    av = abs(v)
+    if av >= _slow_speed(c, d_c, inertia, dt):
+        return d_v + slope, f - slope * v, 0
+    if c[_COUL] == 0.0 and av > c[_VSTICK]:
+        return d_v + slope, f - slope * v, 1
+    return d_v + sec, 0.0, 0
 
 
 @_jit_borrow
@@ -279,27 +285,9 @@ def _joint_constants(c, q):
 
 
 @_jit_borrow
-def _breakaway_tangents(c, vel, M, jf, dt):
-    """Stiction with breakaway (a group's ratio != 1): slow joints of those groups outside the stick band
-    take the tangent, not the secant ``level v_new / |v_old|``, which exceeds the level while a joint breaks
-    away and held joints until 7-20 % above it; returns them (bit q: joint q) for :func:`_secant_fallback`."""
-    slow = 0
-    if c[_COUL] != 0.0 or c[_RATIO] == c[_RATIO + 1] == c[_RATIO + 2] == 1.0:
-        return slow
-    for q in range(3, 9):
-        group, d_v, d_c = _joint_constants(c, q)
-        v = vel[q]
-        if c[_RATIO + group] != 1.0 and c[_VSTICK] < abs(v) < _slow_speed(c, d_c, M[q, q], dt):
-            f, sec, slope = _coulomb(c, v, d_c, group)
-            jf[0, q], jf[1, q] = d_v + slope, f - slope * v
-            slow |= 1 << q
-    return slow
-
-
-@_jit_borrow
 def _secant_fallback(c, vel, K, rhs, M, h, jf, slow, dt):
-    """Re-solve the step where a joint of :func:`_breakaway_tangents` flipped the sign of its velocity:
-    those joints take the secant. ``M``, ``h`` hold K's lower triangle and rhs as before the first solve."""
+    """Re-solve the step where a slow joint on the tangent (``slow``: bit q for joint q, :func:`_friction_terms`)
+    reversed: those joints take the secant. ``M``, ``h``: K's lower triangle and rhs before the first solve."""
     redo = False
     for q in range(3, 9):
         if (slow >> q) & 1 and rhs[q] * vel[q] < 0.0:
@@ -357,11 +345,12 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         dvec[4 + i] = d_long * g
     # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
     _iteration_matrix(M, A, dvec, dt, K)
-    jf[0, 3], jf[1, 3] = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
-    jf[0, 4], jf[1, 4] = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
+    jf[0, 3], jf[1, 3], slow = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
+    jf[0, 4], jf[1, 4], s = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
+    slow = (slow << 3) | (s << 4)
     for i in range(4):
-        jf[0, 5 + i], jf[1, 5 + i] = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
-    slow = _breakaway_tangents(c, vel, M, jf, dt)
+        jf[0, 5 + i], jf[1, 5 + i], s = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
+        slow |= s << (5 + i)
     for q in range(3, 9):
         K[q, q] += dt * jf[0, q]
     # right-hand side M v - dt h + dt B u (+ stops); M is zero outside 0-4 but on the diagonal

@@ -42,9 +42,9 @@ wheels: ``PlantSettings.breakaway_ratios`` / ``stribeck_velocities``, by default
 a joint sticks (creep below 1e-4 rad/s, a numerical regularisation 100 times narrower than the
 model's tanh with epsilon = 0.01 rad/s, which creeps at up to 0.01 rad/s under any torque); above
 it the joint slides with ``d_c sign(v)``.
-A joint of a group with breakaway that is slow but outside the stick band takes the tangent (the
-secant's ``level v_new / |v_old|`` held a joint breaking away until 7-20 % above its level), and the
-secant again only where the tangent would reverse it (``_plant_kernels._breakaway_tangents``).
+A slow joint outside the stick band takes the tangent (the secant's ``level v_new / |v_old|`` held a
+joint breaking away until 7-20 % above its level), and the secant again only where the tangent would
+reverse it (``_plant_kernels._friction_terms``, ``_secant_fallback``).
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
 Payload (issue 31, payload.py): a load fixed to the chassis, mass ``m_p``, first moments

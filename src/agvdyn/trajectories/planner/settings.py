@@ -90,12 +90,15 @@ class NoiseLevels:
     @classmethod
     def calibrated(cls) -> "NoiseLevels":
         """The levels refitted for the identification's steering guard of 4 (since stop 23): steering
-        0.381 / 0.505 N m and one knee of 8.92 rad/s^2 (the rest as the class defaults). Fitted to the
-        jackknife stds of 146 sequences (two vehicles, seeds 0-3): RMS log(predicted / jackknife) over
-        the ten stds 0.368 -> 0.193 (docs/planning.md, "Stop 24"). :func:`evaluate_sequence` predicts
-        with them (``PlanSettings.noise``); the optimiser keeps the class defaults
+        0.359 / 0.396 N m and one knee of 8.92 rad/s^2 (the rest as the class defaults). The knee and
+        the stop-24 levels 0.381 / 0.505 were fitted to the jackknife stds of 146 sequences (two
+        vehicles, seeds 0-3; RMS log(predicted / jackknife) over the ten stds 0.368 -> 0.193,
+        docs/planning.md, "Stop 24"); stop 30 rescaled the two levels after the plant's slow joints
+        stopped sticking above their level (benchmarks/calibrate_steering_noise.py, prototype, the
+        default sequence and two plans, seeds 0-3: RMS log 0.171 -> 0.102). :func:`evaluate_sequence`
+        predicts with them (``PlanSettings.noise``); the optimiser keeps the class defaults
         (``PlanSettings.weights_noise``), with which its plans were better."""
-        return cls(alpha_l=0.381, alpha_r=0.505, knee_alpha_l=8.92, knee_alpha_r=8.92)
+        return cls(alpha_l=0.359, alpha_r=0.396, knee_alpha_l=8.92, knee_alpha_r=8.92)
 
     def of(self, coordinate: str) -> float:
         return float(getattr(self, coordinate))
