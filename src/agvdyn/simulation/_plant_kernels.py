@@ -285,24 +285,46 @@ def _joint_constants(c, q):
 
 
 @_jit_borrow
-def _secant_fallback(c, vel, K, rhs, M, h, jf, slow, dt):
-    """Re-solve the step where a slow joint on the tangent (``slow``: bit q for joint q, :func:`_friction_terms`)
-    reversed: those joints take the secant. ``M``, ``h``: K's lower triangle and rhs before the first solve."""
+def _secant_where_reversed(c, vel, v_new, jf, slow):
+    """The slow joints on the tangent (``slow``: bit q for joint q, :func:`_friction_terms`) whose
+    velocity the step reversed take the secant in ``jf``; True when there was one (solve again)."""
     redo = False
     for q in range(3, 9):
-        if (slow >> q) & 1 and rhs[q] * vel[q] < 0.0:
+        if (slow >> q) & 1 and v_new[q] * vel[q] < 0.0:
             group, d_v, d_c = _joint_constants(c, q)
-            sec = _coulomb(c, vel[q], d_c, group)[1]
-            M[q, q] += dt * (d_v + sec - jf[0, q])
-            h[q] += dt * jf[1, q]
-            jf[0, q], jf[1, q] = d_v + sec, 0.0
+            jf[0, q], jf[1, q] = d_v + _coulomb(c, vel[q], d_c, group)[1], 0.0
             redo = True
-    for p in range(9 if redo else 0):
-        rhs[p] = h[p]
-        for q in range(p + 1):
-            K[p, q] = M[p, q]
-    if redo:
-        _arrow_solve(K, rhs)
+    return redo
+
+
+@_jit_borrow
+def _assemble(c, pos, vel, torque, dt, M, A, h, dvec, jf, K, rhs):
+    """K = M + dt (A^T D A + joint damping + stops) and rhs = M v - dt h + dt B u - dt e (+ stops) of
+    one step; returns the steering angles' penetration of their stops."""
+    _iteration_matrix(M, A, dvec, dt, K)
+    for q in range(3, 9):
+        K[q, q] += dt * jf[0, q]
+    # M is zero outside 0-4 but on the diagonal
+    for p in range(5):
+        t = 0.0
+        for q in range(5):
+            t += M[p, q] * vel[q]
+        rhs[p] = t - dt * h[p]
+    for p in range(5, 9):
+        rhs[p] = (0.0 + M[p, p] * vel[p]) - dt * h[p]
+    for i in range(4):
+        rhs[5 + i] += dt * c[_IG] * torque[i]
+    for q in range(3, 9):
+        rhs[q] -= dt * jf[1, q]
+    lim = 0.5 * math.pi
+    a_l, a_r = pos[3], pos[4]
+    pen0 = a_l - lim if a_l > lim else (a_l + lim if a_l < -lim else 0.0)
+    pen1 = a_r - lim if a_r > lim else (a_r + lim if a_r < -lim else 0.0)
+    for j, pen in ((0, pen0), (1, pen1)):
+        if pen != 0.0:
+            K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
+            rhs[3 + j] -= dt * c[_KSTOP] * pen
+    return pen0, pen1
 
 
 @_jit
@@ -323,8 +345,7 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
     ``mu_w`` (4,): factor on the friction coefficient of each wheel (1: the floor's mu);
     ``M`` .. ``tr``: scratch arrays from :func:`workspace` (explicit: no reference counting per step).
     """
-    a_l, a_r = pos[3], pos[4]
-    _unit_trig(a_l, a_r, tr)
+    _unit_trig(pos[3], pos[4], tr)
     _inertia_terms(c, tr, vel, M, h)
     _constraint_rows(c, tr, A)
     energy = 0.0
@@ -343,43 +364,18 @@ def plant_step(c, pos, vel, torque, dt, work, mu_w, M, K, A, h, rhs, slip, dvec,
         g = _tanh_ratio(((d_lat * slip[i]) ** 2 + (d_long * slip[4 + i]) ** 2) / (mufz * mufz))
         dvec[i] = d_lat * g
         dvec[4 + i] = d_long * g
-    # K = M + dt (A^T D A + joint damping), joint friction force d v_new + e
-    _iteration_matrix(M, A, dvec, dt, K)
+    # joint friction force d v_new + e; K = M + dt (A^T D A + joint damping), the right-hand side
     jf[0, 3], jf[1, 3], slow = _friction_terms(c, vel[3], c[_DVL], c[_DCL], _GROUP_L, M[3, 3], dt)
     jf[0, 4], jf[1, 4], s = _friction_terms(c, vel[4], c[_DVR], c[_DCR], _GROUP_R, M[4, 4], dt)
     slow = (slow << 3) | (s << 4)
     for i in range(4):
         jf[0, 5 + i], jf[1, 5 + i], s = _friction_terms(c, vel[5 + i], c[_DVW], c[_DCW], _GROUP_W, M[5 + i, 5 + i], dt)
         slow |= s << (5 + i)
-    for q in range(3, 9):
-        K[q, q] += dt * jf[0, q]
-    # right-hand side M v - dt h + dt B u (+ stops); M is zero outside 0-4 but on the diagonal
-    for p in range(5):
-        t = 0.0
-        for q in range(5):
-            t += M[p, q] * vel[q]
-        rhs[p] = t - dt * h[p]
-    for p in range(5, 9):
-        rhs[p] = (0.0 + M[p, p] * vel[p]) - dt * h[p]
-    for i in range(4):
-        rhs[5 + i] += dt * c[_IG] * torque[i]
-    for q in range(3, 9):
-        rhs[q] -= dt * jf[1, q]
-    lim = 0.5 * math.pi
-    pen0 = a_l - lim if a_l > lim else (a_l + lim if a_l < -lim else 0.0)
-    pen1 = a_r - lim if a_r > lim else (a_r + lim if a_r < -lim else 0.0)
-    for j, pen in ((0, pen0), (1, pen1)):
-        if pen != 0.0:
-            K[3 + j, 3 + j] += dt * (c[_DSTOP] + dt * c[_KSTOP])
-            rhs[3 + j] -= dt * c[_KSTOP] * pen
-    if slow:  # keep K's lower triangle and rhs (M and h are not read after this)
-        for p in range(9):
-            h[p] = rhs[p]
-            for q in range(p + 1):
-                M[p, q] = K[p, q]
+    pen0, pen1 = _assemble(c, pos, vel, torque, dt, M, A, h, dvec, jf, K, rhs)
     _arrow_solve(K, rhs)
-    if slow:
-        _secant_fallback(c, vel, K, rhs, M, h, jf, slow, dt)
+    if slow and _secant_where_reversed(c, vel, rhs, jf, slow):
+        pen0, pen1 = _assemble(c, pos, vel, torque, dt, M, A, h, dvec, jf, K, rhs)
+        _arrow_solve(K, rhs)
     # energy accounts at the new velocities
     p_motor = 0.0
     for i in range(4):
