@@ -94,9 +94,9 @@ def test_breakaway_of_one_group_sticks_up_to_its_static_level_and_slides_at_d_c(
 @pytest.mark.parametrize("ratio, w_s", [(1.0, 0.05), (1.5, 0.02), (1.5, 0.1)])
 def test_a_ramping_torque_breaks_a_joint_away_at_its_static_level(group, ratio, w_s):
     """The joint torque ramps from 0.8 to 1.3 times the static level ``ratio d_c`` in 2 s: the joint
-    moves (1e-3 rad) with the torque at most 3 % above the level (measured 0.9-1.8 %). The plant's secant
-    for slow joints (``level v_new / |v_old|``, above the level while v grows) held it until 3.6-4.4 %
-    above here, 7-20 % in closed loop; a sliding joint still stops without reversing (the fallback)."""
+    moves (1e-3 rad) with the torque at most 3 % above the level (measured 0.9-2.4 %, deterministic). The
+    plant's secant for slow joints (``level v_new / |v_old|``, above the level while v grows) held it until
+    3.6-4.6 % above here, 7-20 % in closed loop; a sliding joint still stops without reversing (the fallback)."""
     side, d_c, _ = GROUPS[group]
     level = ratio * d_c
     c = plant_constants(G, P.replace(d_vw=0.0, d_cw=0.0), CLEAN.with_breakaway(group, ratio, w_s))
