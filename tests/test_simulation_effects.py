@@ -96,7 +96,7 @@ def test_a_ramping_torque_breaks_a_joint_away_at_its_static_level(group, ratio, 
     """The joint torque ramps from 0.8 to 1.3 times the static level ``ratio d_c`` in 2 s: the joint
     moves (1e-3 rad) with the torque at most 3 % above the level (measured 0.9-2.4 %, deterministic). The
     plant's secant for slow joints (``level v_new / |v_old|``, above the level while v grows) held it until
-    3.6-4.6 % above here, 7-20 % in closed loop; a sliding joint still stops without reversing (the fallback)."""
+    3.6-4.6 % above here, 3-21 % in closed loop; a sliding joint still stops without reversing (the fallback)."""
     side, d_c, _ = GROUPS[group]
     level = ratio * d_c
     c = plant_constants(G, P.replace(d_vw=0.0, d_cw=0.0), CLEAN.with_breakaway(group, ratio, w_s))

@@ -265,7 +265,7 @@ def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
     which never flips the sign of v and holds a stuck joint. With stiction, a slow joint outside the
     stick band takes the tangent too (the caller falls back to the secant where it reverses the
     joint): the secant ``level v_new / |v_old|`` exceeds the level while a joint breaks away (v grows)
-    and held joints until their torque was 7-20 % above the level.
+    and held joints until their torque was 3-21 % above the level.
     """
     f, sec, slope = _coulomb(c, v, d_c, group)
     av = abs(v)

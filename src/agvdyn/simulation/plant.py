@@ -43,7 +43,7 @@ a joint sticks (creep below 1e-4 rad/s, a numerical regularisation 100 times nar
 model's tanh with epsilon = 0.01 rad/s, which creeps at up to 0.01 rad/s under any torque); above
 it the joint slides with ``d_c sign(v)``.
 A slow joint outside the stick band takes the tangent (the secant's ``level v_new / |v_old|`` held a
-joint breaking away until 7-20 % above its level), and the secant again only where the tangent would
+joint breaking away until 3-21 % above its level), and the secant again only where the tangent would
 reverse it (``_plant_kernels._friction_terms``, ``_secant_fallback``).
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
