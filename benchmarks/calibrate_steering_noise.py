@@ -1,7 +1,7 @@
 """Refit the steering noise levels of ``NoiseLevels.calibrated`` (the planner's predicted stds) to the
 jackknife stds of ``agvdyn identify`` on the simulator's default plant.
 
-    .venv/bin/python benchmarks/calibrate_steering_noise.py [--seeds 0-3] [--floors 5.2x1.6 3x2]
+    .venv/bin/python benchmarks/calibrate_steering_noise.py [--seeds 0-3 ...] [--floors 5.2x1.6 3x2]
 
 For each sequence (the default identification sequence and ``plan()``'s plan of each floor, prototype)
 and seed: simulate (default plant), identify (defaults: wls, jackknife std) and predict the stds with
@@ -23,13 +23,9 @@ from agvdyn.io import Log
 from agvdyn.platform import PROTOTYPE
 from agvdyn.simulation import simulate
 from agvdyn.trajectories import planner as pl
+from study_model_extensions import _seeds  # the study's --seeds (this folder is on sys.path)
 
 SIDES = {"alpha_l": ("C_l", "d_vl", "d_cl"), "alpha_r": ("C_r", "d_vr", "d_cr")}
-
-
-def _seeds(text: str) -> list[int]:
-    a, _, b = text.partition("-")
-    return list(range(int(a), int(b or a) + 1))
 
 
 def _ratios(sequences, measured, noise) -> dict[str, np.ndarray]:
@@ -49,7 +45,7 @@ def _show(label: str, ratios: dict[str, np.ndarray]) -> float:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0-3")
+    ap.add_argument("--seeds", nargs="+", default=["0-3"])
     ap.add_argument("--floors", nargs="*", default=["5.2x1.6", "3x2"])
     args = ap.parse_args(argv)
     seeds = _seeds(args.seeds)

@@ -8,7 +8,7 @@ from agvdyn._jit import njit
 from agvdyn._numba_cache import drop_stale_cache
 from agvdyn.simulation import _kernels, _plant_kernels
 from agvdyn.simulation._kernels import read_sensors
-from agvdyn.simulation._plant_kernels import _BW, _DCW, _DVW, _GROUP_W, _IG, _TLIM, _friction_terms
+from agvdyn.simulation._plant_kernels import _BW, _DCW, _DVW, _GROUP_W, _IG, _TLIM, _friction_terms, secant_damping
 
 drop_stale_cache(__file__, _kernels.__file__, _plant_kernels.__file__)
 
@@ -78,7 +78,7 @@ def run_lifted_chunk(k0, k1, c, g, Ts, substeps, wheel_res, steer_res, u_ff, bet
                 d, f0, tangent = _friction_terms(c, v, c[_DVW], c[_DCW], _GROUP_W, bw, dt)
                 v_new = (bw * v + dt * (c[_IG] * ua[i] - f0)) / (bw + dt * d)
                 if tangent and v_new * v < 0.0:  # the secant where the tangent reverses a slow wheel
-                    d, f0 = d + f0 / v, 0.0  # d_v + F(v) / v
+                    d, f0 = secant_damping(c, v, c[_DVW], c[_DCW], _GROUP_W), 0.0
                     v_new = (bw * v + dt * c[_IG] * ua[i]) / (bw + dt * d)
                 work[0] += dt * c[_IG] * ua[i] * v_new
                 work[1] += dt * (d * v_new + f0) * v_new

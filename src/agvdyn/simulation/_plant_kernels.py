@@ -256,6 +256,12 @@ def _slow_speed(c, d_c, inertia, dt):
 
 
 @_jit_borrow
+def secant_damping(c, v, d_v, d_c, group):
+    """``d`` of the secant friction force ``d v_new`` of a slow joint: ``d_v + F(v) / v``."""
+    return d_v + _coulomb(c, v, d_c, group)[1]
+
+
+@_jit_borrow
 def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
     """Linearly-implicit friction of one joint of joint group ``group`` (:func:`_coulomb`):
     force = d * v_new + e; the third value is 1 where a slow joint took the tangent.
@@ -267,13 +273,12 @@ def _friction_terms(c, v, d_v, d_c, group, inertia, dt):
     joint): the secant ``level v_new / |v_old|`` exceeds the level while a joint breaks away (v grows)
     and held joints until their torque was 3-21 % above the level.
     """
-    f, sec, slope = _coulomb(c, v, d_c, group)
     av = abs(v)
-    if av >= _slow_speed(c, d_c, inertia, dt):
-        return d_v + slope, f - slope * v, 0
-    if c[_COUL] == 0.0 and av > c[_VSTICK]:
-        return d_v + slope, f - slope * v, 1
-    return d_v + sec, 0.0, 0
+    slow = av < _slow_speed(c, d_c, inertia, dt)
+    if slow and not (c[_COUL] == 0.0 and av > c[_VSTICK]):
+        return secant_damping(c, v, d_v, d_c, group), 0.0, 0
+    f, _, slope = _coulomb(c, v, d_c, group)
+    return d_v + slope, f - slope * v, 1 if slow else 0
 
 
 @_jit_borrow
@@ -292,7 +297,7 @@ def _secant_where_reversed(c, vel, v_new, jf, slow):
     for q in range(3, 9):
         if (slow >> q) & 1 and v_new[q] * vel[q] < 0.0:
             group, d_v, d_c = _joint_constants(c, q)
-            jf[0, q], jf[1, q] = d_v + _coulomb(c, vel[q], d_c, group)[1], 0.0
+            jf[0, q], jf[1, q] = secant_damping(c, vel[q], d_v, d_c, group), 0.0
             redo = True
     return redo
 

@@ -44,7 +44,7 @@ model's tanh with epsilon = 0.01 rad/s, which creeps at up to 0.01 rad/s under a
 it the joint slides with ``d_c sign(v)``.
 A slow joint outside the stick band takes the tangent (the secant's ``level v_new / |v_old|`` held a
 joint breaking away until 3-21 % above its level), and the secant again only where the tangent would
-reverse it (``_plant_kernels._friction_terms``, ``_secant_fallback``).
+reverse it (``_plant_kernels._friction_terms``, ``_secant_where_reversed``).
 ``coulomb="tanh"`` uses the identification model's ``d_c tanh(v / epsilon)`` instead.
 
 Payload (issue 31, payload.py): a load fixed to the chassis, mass ``m_p``, first moments
