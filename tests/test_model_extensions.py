@@ -19,17 +19,20 @@ from agvdyn.identification import (
     equation_block,
     fit_blocks,
     identify,
+    identify_model,
     log_rows,
     row_passes,
 )
 from agvdyn.identification.model_fit import MIN_SUPPORT_ROWS, extension_estimates
 from agvdyn.identification.model_rows import delayed_torque
-from agvdyn.identification.regression import stacked_system
+from agvdyn.identification.model_search import refused_levels
+from agvdyn.identification.regression import Dependency, stacked_system
 from agvdyn.identification.stretches import filtered_stretch, stretch_bounds
 from agvdyn.io import Log
 from agvdyn.kinematics import Mode, kinematic_model
 from agvdyn.model_file import read_model_parameters
-from agvdyn.model_spec import PAPER_MODEL, ModelParameters, ModelSpec, breakaway_weight, joint_friction
+from agvdyn.model_spec import (PAPER_MODEL, ModelParameters, ModelSpec, breakaway_weight, joint_friction,
+                               model_from_mapping)
 from agvdyn.platform import EPSILON, PAPER_PARAMETERS, PARAMETER_NAMES, PROTOTYPE, PlatformFileError
 from agvdyn.signals import lowpass
 from model_logs import identification_frame, lane_change_frame
@@ -299,6 +302,51 @@ def test_breakaway_below_zero_is_refused_and_below_sliding_warned():
     negative = Log.from_frame(model_frame(ModelParameters(P, {**levels, "d_sw": -0.5 * P.d_cw}, spec=STRIBECK))[0])
     with pytest.raises(ImplausibleError, match="d_sw = "):
         identify(negative, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=SLOW_ROWS)
+
+
+def test_a_refused_breakaway_level_is_held_and_the_model_fitted_again(tmp_path):
+    """identify refuses an impossible breakaway level by name; identify_model holds it at the paper's law
+    (ModelSpec.held), fits again and says why: the level at d_c with an unbounded interval, the refusal's
+    reason a warning, the fit the same as one asked to hold it, and the held level in the JSON's model and
+    in the parameter file (read back). (Exact model data: the misfit the held level leaves makes the
+    steering's parameters noisy, reported here, refused by the default settings.)"""
+    levels = {"d_sl": P.d_cl, "d_sr": P.d_cr, "d_sw": -0.5 * P.d_cw, "w_sl": 0.05, "w_sr": 0.06, "w_sw": 0.08}
+    log = Log.from_frame(model_frame(ModelParameters(P, levels, spec=STRIBECK))[0])
+    settings = SLOW_ROWS.replace(unexcited="report")
+    with pytest.raises(ImplausibleError, match="d_sw = "):
+        identify(log, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=settings)
+    ident = identify_model(log, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=settings)
+    assert ident.model.held == ("d_sw",)
+    assert ident.extra["d_sw"] == ident.parameters.d_cw and ident.extra_std["d_sw"] == math.inf
+    assert sum(w.startswith("d_sw not determined by these data, held at the paper's law") and "d_sw = " in w
+               for w in ident.warnings) == 1
+    with pytest.raises(UnidentifiableError, match="C_l"):  # the default settings refuse what the misfit leaves
+        identify_model(log, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=SLOW_ROWS)
+    asked = identify(log, PROTOTYPE, model=STRIBECK.replace(held=("d_sw",)), keep_blocks=False, settings=settings)
+    assert asked.parameters == ident.parameters and asked.extra == ident.extra
+    assert ident.to_json_dict()["model"]["held"] == ["d_sw"]
+    assert ident.to_json_dict()["parameters"]["d_sw"]["identified"] is False
+    read = read_model_parameters(ident.write(tmp_path / "held.yaml"))
+    assert read.spec.held == ("d_sw",) and read.value("d_sw") == read.parameters.d_cw
+
+
+def test_only_the_breakaway_levels_of_a_refusal_are_held():
+    refusal = UnidentifiableError([Dependency("d_sl", (), math.nan, relative_std=1.12),
+                                   Dependency("C_l", (), math.nan, relative_std=0.7)])
+    assert list(refused_levels(refusal, STRIBECK)) == ["d_sl"] and "112 %" in refused_levels(refusal, STRIBECK)["d_sl"]
+    assert refused_levels(refusal, STRIBECK.replace(held=("d_sl",))) == {}
+    assert refused_levels(ValueError("d_sl"), STRIBECK) == {}
+
+
+@pytest.mark.parametrize("held, match", [(("d_cl",), "expected a list of some of"), ("d_sw", "expected a list"),
+                                         (("d_sw",), "only with friction: stribeck")])
+def test_held_levels_are_breakaway_levels_of_a_stribeck_model(held, match):
+    friction = "paper" if match.startswith("only") else "stribeck"
+    with pytest.raises(ValueError, match=match):
+        ModelSpec(friction=friction, held=held)
+    spec = ModelSpec(friction="stribeck", held=["d_sw", "d_sl"])
+    assert spec.held == ("d_sl", "d_sw") and spec.free_stribeck_names == ("w_sr",)
+    assert model_from_mapping(spec.to_dict()) == spec and "held" not in ModelSpec(friction="stribeck").to_dict()
 
 
 def test_breakaway_without_rows_in_the_stribeck_range_is_undetermined():

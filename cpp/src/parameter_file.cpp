@@ -100,17 +100,28 @@ bool parameter_value(const std::string& source, const Node& table, const std::st
   return true;
 }
 
-// friction, delay (delay_s), com_offset and stribeck_velocities of the `model:` block (agvdyn.model_spec).
+// friction, delay (delay_s), com_offset and stribeck_velocities of the `model:` block (agvdyn.model_spec);
+// `held` names breakaway levels the file gives at the paper's law d_s = d_c (checked, nothing to do).
 bool model_block(const std::string& source, const Node& node, Extension* e, std::string* error) {
   static const char* known[] = {"friction", "delay", "delay_s", "delay_std_s", "com_offset", "stribeck_velocities",
-                                "stribeck_range", "delay_range"};
+                                "stribeck_range", "delay_range", "held"};
   if (!node.is_mapping()) {
     return fail(error, source + ": model: expected a mapping with friction, delay, com_offset, found " + describe(node));
   }
   for (const std::string& key : node.keys) {
     if (std::find(std::begin(known), std::end(known), key) == std::end(known)) {
       return fail(error, source + ": model: unknown key " + key + ": expected some of [com_offset, delay, delay_range, "
-                         "delay_s, delay_std_s, friction, stribeck_range, stribeck_velocities]");
+                         "delay_s, delay_std_s, friction, held, stribeck_range, stribeck_velocities]");
+    }
+  }
+  if (const Node* h = node.find("held"); h != nullptr && !h->is_null()) {
+    const auto level = [](const Node& v) {
+      return v.kind == Node::Kind::scalar && (v.text == "d_sl" || v.text == "d_sr" || v.text == "d_sw");
+    };
+    const Node* bad = !h->is_sequence() ? h : nullptr;
+    for (const Node& v : h->values) bad = bad != nullptr || level(v) ? bad : &v;
+    if (bad != nullptr) {
+      return fail(error, source + ": model.held: " + describe(*bad) + ": expected a list of some of [d_sl, d_sr, d_sw]");
     }
   }
   if (const Node* f = node.find("friction"); f != nullptr) {

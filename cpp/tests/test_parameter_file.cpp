@@ -285,4 +285,8 @@ TEST(ParameterFile, ModelBlockErrorsNameTheFileAndTheKey) {
   EXPECT_NE(error.find("p.yaml: parameter d_sw="), std::string::npos) << error;
   EXPECT_FALSE(parse_extended(text + "  extra: 1\n", &file, &error));
   EXPECT_NE(error.find("unknown key extra"), std::string::npos) << error;
+  // held: the levels the fit gave at the paper's law (ModelSpec.held), names only
+  EXPECT_TRUE(parse_extended(text + "  held: [d_sl, d_sw]\n", &file, &error)) << error;
+  EXPECT_FALSE(parse_extended(text + "  held: [d_cl]\n", &file, &error));
+  EXPECT_EQ(error, "p.yaml: model.held: d_cl: expected a list of some of [d_sl, d_sr, d_sw]");
 }

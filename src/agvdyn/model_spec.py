@@ -80,7 +80,9 @@ class ModelSpec:
     ``friction``: ``"paper"`` or ``"stribeck"``; ``stribeck_velocities``: ``(w_sl, w_sr, w_sw)``
     rad/s when known, None to search them in ``stribeck_range``. ``delay``: seconds the torque
     columns lag the angles, or ``"auto"`` (searched in ``delay_range``). ``com_offset``: estimate
-    the chassis centre of mass ``(x_c, y_c)``.
+    the chassis centre of mass ``(x_c, y_c)``. ``held``: breakaway levels (some of ``d_sl, d_sr, d_sw``)
+    held at the paper's law ``d_s = d_c``, not estimated and reported with an unbounded interval (their
+    Stribeck velocities are not searched): set by a file, or by the fit where the data do not determine them.
     """
 
     friction: str = "paper"
@@ -89,6 +91,7 @@ class ModelSpec:
     stribeck_velocities: tuple[float, float, float] | None = None
     stribeck_range: tuple[float, float] = STRIBECK_RANGE
     delay_range: tuple[float, float] = DELAY_RANGE
+    held: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         friction = str(self.friction).strip().lower()
@@ -115,10 +118,21 @@ class ModelSpec:
             object.__setattr__(self, "stribeck_velocities", v)
         object.__setattr__(self, "stribeck_range", _range("stribeck_range", self.stribeck_range, True))
         object.__setattr__(self, "delay_range", _range("delay_range", self.delay_range, False))
+        held = self.held
+        if not isinstance(held, (tuple, list)) or any(n not in BREAKAWAY_NAMES for n in held):
+            raise ValueError(f"model: held={self.held!r}: expected a list of some of {list(BREAKAWAY_NAMES)}")
+        if held and not self.stribeck:
+            raise ValueError(f"model: held={list(held)}: breakaway levels are held only with friction: stribeck")
+        object.__setattr__(self, "held", tuple(n for n in BREAKAWAY_NAMES if n in held))
 
     @property
     def stribeck(self) -> bool:
         return self.friction == "stribeck"
+
+    @property
+    def free_stribeck_names(self) -> tuple[str, ...]:
+        """The Stribeck velocities of the groups whose breakaway level is estimated (not ``held``)."""
+        return tuple(w for w, d in zip(STRIBECK_NAMES, BREAKAWAY_NAMES) if self.stribeck and d not in self.held)
 
     @property
     def is_paper(self) -> bool:
@@ -154,6 +168,8 @@ class ModelSpec:
             out["stribeck_range"] = list(self.stribeck_range)
         if self.delay_range != DELAY_RANGE:
             out["delay_range"] = list(self.delay_range)
+        if self.held:
+            out["held"] = list(self.held)
         return out
 
     def replace(self, **changes: Any) -> "ModelSpec":
@@ -170,7 +186,7 @@ def model_from_mapping(data: Any, where: str = "model") -> ModelSpec:
         return PAPER_MODEL
     if not isinstance(data, Mapping):
         raise ValueError(f"{where}: expected a mapping with friction, delay, com_offset, found {data!r}")
-    known = {"friction", "delay", "com_offset", "stribeck_velocities", "stribeck_range", "delay_range"}
+    known = {"friction", "delay", "com_offset", "stribeck_velocities", "stribeck_range", "delay_range", "held"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(f"{where}: unknown keys {unknown}: expected some of {sorted(known)}")

@@ -136,16 +136,17 @@ MIN_SUPPORT_ROWS = 500
 def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[str, str]:
     """The breakaway levels the rows cannot show, with why: groups with fewer than :data:`MIN_SUPPORT_ROWS`
     used rows in their Stribeck range (``support``, counted by the row pass; empty: not counted, nothing
-    judged). Their column then holds only the filter's tails of stick phases (a passive steering sticks
-    at every reversal and crosses the range within milliseconds): a number fitted there is not a
-    breakaway level. They are held at the paper's law (``d_s = d_c``, :func:`tie_unsupported`) and reported with an
+    judged), and the levels the model holds (``ModelSpec.held``). A group's column without rows holds only
+    the filter's tails of stick phases (a passive steering sticks at every reversal and crosses the range
+    within milliseconds): a number fitted there is not a breakaway level. They are held at the paper's law (``d_s = d_c``, :func:`tie_unsupported`) and reported with an
     unbounded interval."""
-    if not model.stribeck or not support:
+    if not model.stribeck:
         return {}
-    out = {}
-    for g, w_s in zip("lrw", model.stribeck_velocities):
-        n = int(support.get(g, 0))
-        if n < MIN_SUPPORT_ROWS:
+    out = {n: (f"{n} held at the paper's law d_s = d_c (the model's held levels): not estimated, interval "
+               "unbounded") for n in model.held}
+    for g, w_s in zip("lrw", model.stribeck_velocities or (math.nan,) * 3):
+        n = int(support.get(g, 0)) if support else -1
+        if 0 <= n < MIN_SUPPORT_ROWS and f"d_s{g}" not in out:
             out[f"d_s{g}"] = (f"d_s{g} not determined: {n} used rows of the {_GROUP_NAMES[g]} run in its Stribeck range "
                               f"(|rate| < {0.83 * w_s:.3g} rad/s, needs {MIN_SUPPORT_ROWS}); its column holds only the "
                               "filter's tails of stick phases. Held at the paper's law d_s = d_c (its column joins "

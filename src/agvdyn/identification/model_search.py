@@ -36,11 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn.identification.plausibility import ImplausibleError
 from agvdyn.identification.profile import Profile, profile_interval, profile_minimum, profile_std
+from agvdyn.identification.regression import UnidentifiableError
 from agvdyn.identification.search_uncertainty import SearchSpread, searched_spread, with_spread
 from agvdyn.identification.settings import CHASSIS_COORDINATES, IdentificationSettings
 from agvdyn.io import LogFile
-from agvdyn.model_spec import STRIBECK_NAMES, ModelSpec
+from agvdyn.model_spec import BREAKAWAY_NAMES, STRIBECK_NAMES, ModelSpec
 
 __all__ = ["concentrated_likelihood", "delay_evidence", "SearchResult", "search_model", "searched_values",
            "check_search_ranges", "search_settings", "searched_intervals", "identify_model", "model_identification",
@@ -113,8 +115,8 @@ def search_model(objective: Callable[[ModelSpec, str], float], model: ModelSpec,
         searched.append(DELAY)
     if model.stribeck and model.stribeck_velocities is None:
         lo, hi = model.stribeck_range
-        values.update({n: math.sqrt(lo * hi) for n in STRIBECK_NAMES})
-        searched += list(STRIBECK_NAMES)
+        values.update({n: math.sqrt(lo * hi) for n in STRIBECK_NAMES})  # a held group's stays there
+        searched += list(model.free_stribeck_names)
     started = start is not None and all(n in start for n in searched)
     if started:
         values.update({n: float(start[n]) for n in searched})
@@ -263,7 +265,43 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
                          settings: IdentificationSettings = IdentificationSettings(), estimator: Any = None,
                          experiment: str = "auto", keep_blocks: bool = True, workers: int | None = None,
                          delay_groups: str = "chassis", start: Mapping[str, float] | None = None) -> ModelFit:
-    """:func:`identify_model` with what it made (:class:`ModelFit`); ``start``: see :func:`search_model`."""
+    """:func:`identify_model` with what it made (:class:`ModelFit`); ``start``: see :func:`search_model`.
+
+    A breakaway level the fit refuses (too uncertain, its searched Stribeck velocity's uncertainty
+    included, or impossible) is held at the paper's law (``ModelSpec.held``) and the model fitted
+    again, the refusal's reason a warning: the data do not show that group's breakaway, the other
+    parameters still stand. A refusal of any other parameter is raised."""
+    reasons: list[str] = []
+    while True:
+        try:
+            fit = _model_identification(logs, platform, model=model, fixed=fixed, settings=settings,
+                                        estimator=estimator, experiment=experiment, keep_blocks=keep_blocks,
+                                        workers=workers, delay_groups=delay_groups, start=start)
+        except (UnidentifiableError, ImplausibleError) as exc:
+            refused = refused_levels(exc, model)
+            if not refused:
+                raise
+            model = model.replace(held=model.held + tuple(refused))
+            reasons += [f"{n} not determined by these data, held at the paper's law d_s = d_c (interval unbounded): "
+                        f"{why}" for n, why in refused.items()]
+            continue
+        if not reasons:
+            return fit
+        ident = dataclasses.replace(fit.identification, warnings=tuple(reasons) + fit.identification.warnings)
+        return dataclasses.replace(fit, identification=ident, warnings=tuple(reasons) + fit.warnings)
+
+
+def refused_levels(exc: Exception, model: ModelSpec) -> dict[str, str]:
+    """The breakaway levels (not yet held by ``model``) a refusal names, with its description of each."""
+    named = getattr(exc, "dependencies", ()) or getattr(exc, "implausible", ())
+    return {d.name: " ".join(d.describe().split()) for d in named
+            if d.name in BREAKAWAY_NAMES and d.name not in model.held}
+
+
+def _model_identification(logs: Any, platform: Any, *, model: ModelSpec, fixed: Mapping[str, float] | None,
+                          settings: IdentificationSettings, estimator: Any, experiment: str, keep_blocks: bool,
+                          workers: int | None, delay_groups: str, start: Mapping[str, float] | None) -> ModelFit:
+    """One :func:`model_identification` of ``model`` as it is (its held levels held)."""
     from agvdyn.identification.lifted import experiment_of
     from agvdyn.identification.pipeline import identify, platform_for
     from agvdyn.identification.settings import DEFAULT_FIXED
@@ -297,6 +335,7 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
     hac = functools.partial(search_fit, items, geometry, found.model, settings, uncertainty="hac", **options)
     steps = correlation_steps(final, hac)
     stds, warnings, fits, intervals = searched_intervals(found, objective, steps)
+    stds.update({w: math.inf for w in STRIBECK_NAMES if model.stribeck and w not in model.free_stribeck_names})
     values = searched_values(found.model)
     spread = searched_spread(final, values, intervals, {n: p.bounds for n, p in found.profiles.items()},
                              lambda at: search_fit(items, geometry, _resolved(found.model, at), settings, **options))

@@ -197,11 +197,14 @@ class Identification:
 
     def _model_entry(self) -> dict[str, Any]:
         """The JSON ``model``: friction law, delay (s) and its std (None: given), com_offset; an unbounded
-        delay interval as ``delay_std_s: null`` with ``delay_identified: false`` (JSON has no infinity)."""
+        delay interval as ``delay_std_s: null`` with ``delay_identified: false`` (JSON has no infinity);
+        ``held``: the breakaway levels held at the paper's law, when there are."""
         entry = {"friction": self.model.friction, "delay_s": float(self.model.delay), "delay_std_s": self.delay_std_s,
                  "com_offset": self.model.com_offset}
         if self.delay_std_s is not None and not math.isfinite(self.delay_std_s):
             entry.update(delay_std_s=None, delay_identified=False)
+        if self.model.held:  # breakaway levels held at the paper's law (ModelSpec.held)
+            entry["held"] = list(self.model.held)
         return entry
 
     @property
