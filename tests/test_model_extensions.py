@@ -330,6 +330,17 @@ def test_a_refused_breakaway_level_is_held_and_the_model_fitted_again(tmp_path):
     assert read.spec.held == ("d_sw",) and read.value("d_sw") == read.parameters.d_cw
 
 
+def test_steering_levels_held_with_their_unexcited_coulomb_columns(paper_log):
+    """The chassis segments alone: the steering's levels (no rows in their Stribeck range) are tied to d_cl,
+    d_cr, which no row excites; reported, both are held together (was: a ValueError from the tie's
+    lost target) and the Stribeck fit is the paper's."""
+    settings = REPORT.replace(segments=("straight", "rotation"))
+    ident = identify(paper_log, PROTOTYPE, model=STRIBECK, keep_blocks=False, settings=settings)
+    paper = identify(paper_log, PROTOTYPE, keep_blocks=False, settings=settings)
+    assert ident.parameters.to_vector() == pytest.approx(paper.parameters.to_vector(), rel=1e-9)
+    assert ident.extra["d_sl"] == ident.parameters.d_cl == 0.0 and ident.extra_std["d_sl"] == math.inf
+
+
 def test_only_the_breakaway_levels_of_a_refusal_are_held():
     refusal = UnidentifiableError([Dependency("d_sl", (), math.nan, relative_std=1.12),
                                    Dependency("C_l", (), math.nan, relative_std=0.7)])

@@ -284,15 +284,19 @@ class RegressionData:
 
     def holding(self, columns: Sequence[int], values: np.ndarray) -> "RegressionData":
         """The same system with the free columns at positions ``columns`` held at ``values`` (moved
-        to the right like the fixed parameters of eq. 24)."""
+        to the right like the fixed parameters of eq. 24); a column tied to a held one is held with it."""
         keep = [i for i in range(len(self.free)) if i not in set(columns)]
         held = [self.free[i] for i in columns]
         theta_fixed = self.theta_fixed.copy()
         theta_fixed[held] = values
+        for column, target in self.ties:
+            if target in held:
+                theta_fixed[column] = theta_fixed[target]
         shift = self.A[:, list(columns)] @ np.asarray(values, dtype=float)
         pseudo = tuple(np.column_stack([P[:, keep], P[:, -1] - P[:, list(columns)] @ values]) for P in self.key_pseudo)
         return dataclasses.replace(self, A=self.A[:, keep], y=self.y - shift, free=tuple(self.free[i] for i in keep),
-                                   theta_fixed=theta_fixed, key_pseudo=pseudo)
+                                   theta_fixed=theta_fixed, key_pseudo=pseudo,
+                                   ties=tuple((c, t) for c, t in self.ties if t not in held))
 
     def tying(self, columns: Sequence[int], targets: Sequence[int]) -> "RegressionData":
         """The same system with the free columns at positions ``columns`` tied to those at ``targets``
