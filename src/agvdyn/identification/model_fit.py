@@ -31,7 +31,7 @@ from agvdyn.model_spec import BREAKAWAY_NAMES, CENTRE_NAMES, FRICTION_GROUPS, ST
 from agvdyn.platform import PARAMETER_NAMES, Geometry, Parameters
 
 __all__ = ["UNOBSERVABLE", "hold_unobservable", "tie_unsupported", "with_unobservable", "extension_estimates",
-           "breakaway_warnings", "unsupported_breakaway", "held_parameters", "MIN_SUPPORT_ROWS",
+           "breakaway_warnings", "unsupported_breakaway", "held_parameters", "held_reason", "MIN_SUPPORT_ROWS",
            "noisy_extensions", "residual_sums", "linear_values", "rejected_extension"]
 
 
@@ -142,8 +142,7 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
     unbounded interval."""
     if not model.stribeck:
         return {}
-    out = {n: (f"{n} held at the paper's law d_s = d_c (the model's held levels): not estimated, interval "
-               "unbounded") for n in model.held}
+    out = {n: held_reason(n) for n in model.held}
     for g, w_s in zip("lrw", model.stribeck_velocities or (math.nan,) * 3):
         n = int(support.get(g, 0)) if support else -1
         if 0 <= n < MIN_SUPPORT_ROWS and f"d_s{g}" not in out:
@@ -155,6 +154,11 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
 
 
 _GROUP_NAMES = {"l": "left steering", "r": "right steering", "w": "wheels"}
+
+
+def held_reason(name: str) -> str:
+    """The warning of a breakaway level the model holds (``ModelSpec.held``)."""
+    return f"{name} held at the paper's law d_s = d_c (the model's held levels): not estimated, interval unbounded"
 
 
 def held_parameters(model: ModelSpec, ident: Any) -> tuple[str, ...]:

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from agvdyn.identification.model_fit import held_reason
 from agvdyn.identification.plausibility import ImplausibleError
 from agvdyn.identification.profile import Profile, profile_interval, profile_minimum, profile_std
 from agvdyn.identification.regression import UnidentifiableError
@@ -271,7 +272,7 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
     included, or impossible) is held at the paper's law (``ModelSpec.held``) and the model fitted
     again, the refusal's reason a warning: the data do not show that group's breakaway, the other
     parameters still stand. A refusal of any other parameter is raised."""
-    reasons: list[str] = []
+    reasons: dict[str, str] = {}
     while True:
         try:
             fit = _model_identification(logs, platform, model=model, fixed=fixed, settings=settings,
@@ -282,13 +283,16 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
             if not refused:
                 raise
             model = model.replace(held=model.held + tuple(refused))
-            reasons += [f"{n} not determined by these data, held at the paper's law d_s = d_c (interval unbounded): "
-                        f"{why}" for n, why in refused.items()]
+            reasons.update(refused)
             continue
         if not reasons:
             return fit
-        ident = dataclasses.replace(fit.identification, warnings=tuple(reasons) + fit.identification.warnings)
-        return dataclasses.replace(fit, identification=ident, warnings=tuple(reasons) + fit.warnings)
+        said = tuple(f"{n} not determined by these data, held at the paper's law d_s = d_c (interval unbounded): "
+                     f"{why}" for n, why in reasons.items())
+        generic = {held_reason(n) for n in reasons}  # said with the refusal's reason instead
+        warnings = said + tuple(w for w in fit.identification.warnings if w not in generic)
+        return dataclasses.replace(fit, identification=dataclasses.replace(fit.identification, warnings=warnings),
+                                   warnings=said + fit.warnings)
 
 
 def refused_levels(exc: Exception, model: ModelSpec) -> dict[str, str]:
