@@ -328,6 +328,10 @@ def test_a_refused_breakaway_level_is_held_and_the_model_fitted_again(tmp_path):
     assert ident.to_json_dict()["parameters"]["d_sw"]["identified"] is False
     read = read_model_parameters(ident.write(tmp_path / "held.yaml"))
     assert read.spec.held == ("d_sw",) and read.value("d_sw") == read.parameters.d_cw
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((tmp_path / "held.yaml").read_text().replace("- d_sw", "- d_cw"))
+    with pytest.raises(PlatformFileError, match=r"bad.yaml: model: held: 'd_cw': expected a list of some of"):
+        read_model_parameters(bad)
 
 
 def test_steering_levels_held_with_their_unexcited_coulomb_columns(paper_log):

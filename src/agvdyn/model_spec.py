@@ -119,8 +119,10 @@ class ModelSpec:
         object.__setattr__(self, "stribeck_range", _range("stribeck_range", self.stribeck_range, True))
         object.__setattr__(self, "delay_range", _range("delay_range", self.delay_range, False))
         held = self.held
-        if not isinstance(held, (tuple, list)) or any(n not in BREAKAWAY_NAMES for n in held):
-            raise ValueError(f"model: held={self.held!r}: expected a list of some of {list(BREAKAWAY_NAMES)}")
+        bad = [held] if not isinstance(held, (tuple, list)) else [n for n in held if n not in BREAKAWAY_NAMES]
+        if bad:
+            raise ValueError(f"model: held: {', '.join(map(repr, bad))}: expected a list of some of "
+                             f"{list(BREAKAWAY_NAMES)}")
         if held and not self.stribeck:
             raise ValueError(f"model: held={list(held)}: breakaway levels are held only with friction: stribeck")
         object.__setattr__(self, "held", tuple(n for n in BREAKAWAY_NAMES if n in held))
