@@ -138,8 +138,8 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
     used rows in their Stribeck range (``support``, counted by the row pass; empty: not counted, nothing
     judged), and the levels the model holds (``ModelSpec.held``). A group's column without rows holds only
     the filter's tails of stick phases (a passive steering sticks at every reversal and crosses the range
-    within milliseconds): a number fitted there is not a breakaway level. They are held at the paper's law (``d_s = d_c``, :func:`tie_unsupported`) and reported with an
-    unbounded interval."""
+    within milliseconds): a number fitted there is not a breakaway level. They are held at the paper's law
+    (``d_s = d_c``, :func:`tie_unsupported`) and reported with an unbounded interval."""
     if not model.stribeck:
         return {}
     out = {n: held_reason(n) for n in model.held}
