@@ -41,6 +41,17 @@ def test_more_parameters_never_predict_a_smaller_std(sequence, spec):
         assert b.std[name] >= s * (1 - 1e-9), (name, s, b.std[name])
 
 
+def test_held_levels_are_not_estimated(sequence):
+    """A level the spec holds has no column (its Coulomb column stays the paper's) and an unbounded std:
+    all three held, the paper's parameters are predicted as the paper model's."""
+    paper = evaluate_sequence(sequence)
+    held = evaluate_sequence(sequence, model=SPECS[0].replace(held=("d_sl", "d_sr", "d_sw")))
+    assert {n: held.std[n] for n in paper.std} == pytest.approx(paper.std, rel=1e-12)
+    assert all(held.std[n] == math.inf for n in ("d_sl", "d_sr", "d_sw"))
+    wheels = evaluate_sequence(sequence, model=SPECS[0].replace(held=("d_sl", "d_sr")))
+    assert 0 < wheels.std["d_sw"] < math.inf and wheels.std["d_sl"] == math.inf
+
+
 def test_stribeck_columns_split_the_coulomb_column(sequence):
     """(1 - e) tanh + e tanh = tanh: the Coulomb and breakaway columns sum to the paper's Coulomb column."""
     settings = PlanSettings()

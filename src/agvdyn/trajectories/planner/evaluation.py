@@ -197,6 +197,7 @@ def _extra_std(model: ModelParameters | None, d: np.ndarray, cov: np.ndarray, n_
         out["y_c"] = float(math.sqrt(max(grad @ sub @ grad, 0.0)))
     if model.spec.com_offset:
         out["x_c"] = math.inf  # its column vanishes in every mode (model_columns)
+    out.update(dict.fromkeys(model.spec.held, math.inf))  # held at the paper's law: not estimated
     return out
 
 

@@ -3,7 +3,8 @@ planner's predicted standard deviations (:func:`.evaluation.evaluate_sequence` w
 
 On the exact planned motion (no filter) and with the equations of :mod:`agvdyn.model_spec`:
 
-* ``stribeck``: per joint group the breakaway column ``H^T [e tanh(w/eps)]`` (``e = exp(-(w/w_s)^2)``);
+* ``stribeck``: per joint group the breakaway column ``H^T [e tanh(w/eps)]`` (``e = exp(-(w/w_s)^2)``; none
+  for a level the spec holds);
   the Coulomb column becomes ``H^T [(1 - e) tanh]`` (the identification's parametrisation: ``d_s``
   the static level); ``w_s`` from the model's values (or its spec, else the middle of its range);
 * ``com_offset``: the column of ``m_ch y_c`` (rows ``(-w_dot, -w^2, -a_x)`` on ``(x, y, gamma)``);
@@ -27,9 +28,10 @@ _ROWS = {"l": (3,), "r": (4,), "w": (5, 6, 7, 8)}
 
 
 def extra_names(spec: ModelSpec) -> tuple[str, ...]:
-    """Names of the predicted extra stds, in column order: ``d_sl, d_sr, d_sw``, ``y_c``, ``delay_s``."""
-    return ((BREAKAWAY_NAMES if spec.stribeck else ()) + (("y_c",) if spec.com_offset else ())
-            + (("delay_s",) if spec.delay != 0.0 else ()))
+    """Names of the predicted extra stds, in column order: ``d_sl, d_sr, d_sw`` (those not ``held``), ``y_c``,
+    ``delay_s``."""
+    return (tuple(n for n in BREAKAWAY_NAMES if spec.stribeck and n not in spec.held)
+            + (("y_c",) if spec.com_offset else ()) + (("delay_s",) if spec.delay != 0.0 else ()))
 
 
 def stribeck_velocities(model: ModelParameters | ModelSpec) -> tuple[float, float, float]:
@@ -50,6 +52,8 @@ def segment_columns(geom: Geometry, spec: ModelSpec, w_s: tuple[float, float, fl
     cols = []
     if spec.stribeck:
         for g, w in zip("lrw", w_s):
+            if f"d_s{g}" in spec.held:  # at the paper's law: its Coulomb column stays the paper's
+                continue
             rows = list(_ROWS[g])
             rate = qd[:, rows]
             signal = breakaway_weight(rate, w) * np.tanh(rate / EPSILON)  # (N, joints)
