@@ -60,7 +60,7 @@ def run_pipeline(out_dir: Path) -> Path:
 
     _section("Identify (eq. 22-25) from the identification log, B_w = 0.121 fixed")
     ident_logs = load_logs([logs["identification"]])
-    ident = identify(ident_logs)
+    ident = identify(ident_logs, check_rows=True)
     params_path = ident.write(out_dir / "params.yaml")
     reference = choose_reference(ident_logs, ident.geometry)
     table = parameter_table(ident, reference)

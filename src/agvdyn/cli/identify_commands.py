@@ -195,6 +195,11 @@ def identify(
     delay_range: M.DelayRangeOpt = None,
     stribeck_range: M.StribeckRangeOpt = None,
     validation: M.ValidationOpt = None,
+    row_check: Annotated[bool, typer.Option(
+        "--row-check/--no-row-check", help="Also fit the steering parameters on the stick-slip rows (filtering "
+                                           "matched, steering guard 12) and warn when they move beyond their "
+                                           "stds: breakaway friction biases the default rows (one more fit; "
+                                           "paper model, default rows only).")] = True,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.
@@ -206,7 +211,8 @@ def identify(
     fixed = _fixed(fix)
     settings = settings_of(locals())
     search = M.search_of(model, compare_models, delay_range, stribeck_range, validation, mapping, platform, settings)
-    ident = _identified(logs, platform, mapping, fixed, settings, experiment, search, keep_blocks=False, workers=threads)
+    ident = _identified(logs, platform, mapping, fixed, settings, experiment, search, keep_blocks=False, workers=threads,
+                        check_rows=row_check)
     ident, selection = ident if isinstance(ident, tuple) else (ident, None)
     try:
         written = ident.write(out)

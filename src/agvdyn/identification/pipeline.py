@@ -31,6 +31,7 @@ from agvdyn.identification.plausibility import (
 )
 from agvdyn.identification.regression import Estimator, UnidentifiableError
 from agvdyn.identification.result import Identification
+from agvdyn.identification.row_check import with_row_check
 from agvdyn.identification.rows import log_rows
 from agvdyn.identification.settings import CHASSIS_COORDINATES, DEFAULT_FIXED, OFFSET_NAMES, IdentificationSettings
 from agvdyn.identification.stretches import log_source
@@ -72,7 +73,7 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
              settings: IdentificationSettings = IdentificationSettings(),
              estimator: Estimator | None = None, experiment: str = "auto", keep_blocks: bool = True,
              workers: int | None = None, rows: Sequence[LogRows] | None = None,
-             model: ModelSpec = PAPER_MODEL) -> Identification:
+             model: ModelSpec = PAPER_MODEL, check_rows: bool = False) -> Identification:
     """Identify the dynamic parameters p (eq. 18) from one or more logs, eq. (22)-(25).
 
     Logs are reduced one at a time (their kept rows to normal equations, see
@@ -97,6 +98,9 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
         used instead of passing the logs again.
     model : a resolved :class:`agvdyn.model_spec.ModelSpec` (default the paper's); a delay ``'auto'`` or
         unknown Stribeck velocities are a ValueError (searched, not fitted by one regression).
+    check_rows : also fit the steering parameters on the stick-slip rows and warn where they move beyond
+        their stds (:func:`.row_check.steering_row_check`: breakaway friction biases the default rows;
+        one more fit, what the ``identify`` command and the report do).
 
     The first call asks glibc to keep freed memory for reuse (:func:`.workspace.keep_freed_memory`).
 
@@ -124,9 +128,14 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
     jobs = _jobs(items, check_lifted=checked, rows=rows)
     workers = default_workers() if workers is None else int(workers)
     try:
-        return _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers, model)[0]
+        ident = _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers, model)[0]
     except (UnidentifiableError, ImplausibleError) as exc:
         raise _diagnosis(exc, items, geometry, fixed, settings, estimator, model) from None
+    if not check_rows:
+        return ident
+    return with_row_check(ident, lambda other: identify(items, geometry, fixed=fixed, settings=other,
+                                                         estimator=estimator, experiment=experiment,
+                                                         keep_blocks=False, workers=workers, model=model))
 
 
 def _items(logs: Any) -> list[LoadedLog]:

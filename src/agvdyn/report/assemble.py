@@ -359,7 +359,7 @@ def _identified(logs: Sequence[Any], geometry: Geometry, fixed: Mapping[str, flo
         raise ValueError(f"models={models!r}: expected one of {REPORT_MODELS}")
     try:
         if models == "paper":
-            return identify(logs, geometry, fixed=fixed, settings=settings, rows=rows), None, None
+            return identify(logs, geometry, fixed=fixed, settings=settings, rows=rows, check_rows=True), None, None
         from agvdyn.identification import compare_models
         from agvdyn.validation import validation_score
 
