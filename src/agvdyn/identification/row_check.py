@@ -10,8 +10,8 @@ steering parameter moves by more than :data:`THRESHOLD` times ``hypot`` of the t
 use the same data, so this understates the move's significance: a conservative test).
 
 Measured (identification sequence, z = the largest of the six steering parameters'): effect-free 0.5-1.9
-on 15 logs (10 of our plant, 5 MuJoCo); breakaway 1.2x / 0.02 rad/s 1.6-2.6 (6 logs), 1.3x / 0.05
-2.9-3.3 (3), 1.5x / 0.1 4.8 (2).
+on 16 logs (11 of our plant, 5 MuJoCo); breakaway 1.2x / 0.02 rad/s 1.6-2.6 (5 logs), 1.3x / 0.05
+2.9-3.8 (4), 1.5x / 0.1 4.8 (2).
 """
 from __future__ import annotations
 
