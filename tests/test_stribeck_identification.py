@@ -125,7 +125,7 @@ def test_default_rows_bias_the_steering_under_breakaway(breakaway_log):
 def test_the_row_check_warns_where_breakaway_biases_the_default_rows(breakaway_log, effect_free_log, tmp_path):
     """identify(check_rows=True), the identify command and the report refit on the stick-slip rows: under
     breakaway 1.3x the steering parameters move by 3.8 combined std (seed 0; 2.9-3.3 on seeds 1-2), on the
-    effect-free log by 1.1 (at most 1.9 on 15 logs of both plants), against a threshold of 2.5. A warning
+    effect-free log by 1.1 (at most 1.9 on 16 logs of both plants), against a threshold of 2.5. A warning
     naming d_vr and what to do there, none here, the estimates unchanged; none where the rows already are
     the stick-slip ones; the command's --no-row-check leaves it out."""
     from typer.testing import CliRunner
