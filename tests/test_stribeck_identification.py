@@ -127,7 +127,7 @@ def test_the_row_check_warns_where_breakaway_biases_the_default_rows(breakaway_l
     breakaway 1.3x the steering parameters move by 3.8 combined std (seed 0; 2.9-3.3 on seeds 1-2), on the
     effect-free log by 1.1 (at most 1.9 on 16 logs of both plants), against a threshold of 2.5. A warning
     naming d_vr and what to do there, none here, the estimates unchanged; none where the rows already are
-    the stick-slip ones; the command's --no-row-check leaves it out."""
+    the stick-slip ones; the command's --no-row-check leaves it out, with --model it refits the model."""
     from typer.testing import CliRunner
 
     from agvdyn.cli import app
@@ -142,9 +142,10 @@ def test_the_row_check_warns_where_breakaway_biases_the_default_rows(breakaway_l
     assert not any("depend on the rows" in w for w in quiet.warnings)
     stick = IdentificationSettings.from_flat(filtering="matched", steering_guard=12.0)
     assert not row_check_applies(identify(breakaway_log, PROTOTYPE, keep_blocks=False, settings=stick), stick)
-    path = tmp_path / "breakaway.parquet"
+    path, model = tmp_path / "breakaway.parquet", tmp_path / "model.yaml"
     breakaway_log.frame.to_parquet(path)
-    for flag, expected in (([], True), (["--no-row-check"], False)):
+    model.write_text("model: {friction: stribeck, stribeck_velocities: [0.05, 0.05, 0.05]}\n")
+    for flag, expected in (([], True), (["--no-row-check"], False), (["--model", str(model)], True)):
         res = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "p.yaml"), "--json", *flag])
         assert res.exit_code == 0, res.output
         assert any("depend on the rows" in w for w in json.loads(res.stdout)["warnings"]) is expected

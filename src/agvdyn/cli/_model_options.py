@@ -111,11 +111,14 @@ def search_of(model: str, compare: bool, delay_range: Optional[str], stribeck_ra
     return functools.partial(modelled, spec=spec, auto=auto, compare=compare, validation=score)
 
 
-def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, *, spec, auto: bool, compare: bool,
-             validation):
+def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, check_rows: bool = False, *, spec,
+             auto: bool, compare: bool, validation):
     """``(identification, selection)``: the comparison (``auto`` or ``compare``; None otherwise) and
-    the fit of ``spec`` (``auto``: the comparison's choice)."""
+    the fit of ``spec`` (``auto``: the comparison's choice); ``check_rows``: the fit's model (resolved)
+    refitted on the stick-slip rows (:func:`agvdyn.identification.row_check.with_row_check`)."""
+    from agvdyn.identification import identify
     from agvdyn.identification.model_search import identify_model
+    from agvdyn.identification.row_check import with_row_check
     from agvdyn.identification.selection import compare_models
 
     selection = None
@@ -123,9 +126,13 @@ def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, *,
     if auto or compare:
         selection = compare_models(logs, geometry, validation=validation, delay_range=spec.delay_range,
                                    stribeck_range=spec.stribeck_range, **options)
-    if auto:
-        return selection.identification, selection
-    return identify_model(logs, geometry, model=spec, keep_blocks=False, **options), selection
+    ident = selection.identification if auto else identify_model(logs, geometry, model=spec, keep_blocks=False,
+                                                                 **options)
+    if check_rows:
+        ident = with_row_check(ident, lambda other: identify(logs, geometry, fixed=fixed, settings=other,
+                                                             experiment=experiment, keep_blocks=False,
+                                                             workers=workers, model=ident.model))
+    return ident, selection
 
 
 def with_selection(data: dict, selection) -> dict:

@@ -142,7 +142,7 @@ def _identified(paths: list[Path], platform: Optional[Path], mapping: Optional[P
             return identify_lifted([log.load() for log in logs], geometry, settings=settings)
         kind = "auto" if str(experiment).strip().lower() == "auto" else "vehicle"
         if search is not None:
-            return search(logs, geometry, fixed, settings, kind, options["workers"])
+            return search(logs, geometry, fixed, settings, kind, options["workers"], options.get("check_rows", False))
         return identify_parameters(logs, geometry, fixed=fixed, settings=settings, experiment=kind, **options)
     except (UnidentifiableError, ImplausibleError) as exc:
         raise fail(f"refused: {exc}", code=1) from exc
@@ -198,8 +198,8 @@ def identify(
     row_check: Annotated[bool, typer.Option(
         "--row-check/--no-row-check", help="Also fit the steering parameters on the stick-slip rows (filtering "
                                            "matched, steering guard 12) and warn when they move beyond their "
-                                           "stds: breakaway friction biases the default rows (one more fit; "
-                                           "paper model, default rows only).")] = True,
+                                           "stds: breakaway friction biases the default rows (one more fit, "
+                                           "of the model fitted; with the default rows only).")] = True,
     as_json: JsonOpt = False,
 ) -> None:
     """Identify the dynamic parameters from logs (eq. 22-25) and write the parameter file.

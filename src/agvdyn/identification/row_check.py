@@ -43,13 +43,13 @@ def row_check_applies(ident: Any, settings: IdentificationSettings) -> bool:
 
 def steering_row_check(ident: Any, refit: Callable[[IdentificationSettings], Any]) -> list[str]:
     """Warnings where the steering parameters of ``ident`` move beyond :data:`THRESHOLD` combined stds when
-    fitted on the stick-slip rows: ``refit(settings)`` is the same fit with other settings (it may refuse:
-    then nothing is said). Empty when :func:`row_check_applies` is false."""
+    fitted on the stick-slip rows: ``refit(settings)`` is the same fit with other settings (undetermined
+    parameters reported, not refused; an impossible value refuses it: then nothing is said). Empty when :func:`row_check_applies` is false."""
     settings = ident.settings
     if not row_check_applies(ident, settings):
         return []
-    try:
-        other = refit(settings.replace(**STICK_SLIP_ROWS))
+    try:  # the steering parameters compared; others the stick-slip rows leave undetermined are not refused
+        other = refit(settings.replace(**STICK_SLIP_ROWS, unexcited="report", max_relative_std=math.inf))
     except (UnidentifiableError, ImplausibleError):
         return []
     moves = _moves(ident, other)
