@@ -44,7 +44,8 @@ def row_check_applies(ident: Any, settings: IdentificationSettings) -> bool:
 def steering_row_check(ident: Any, refit: Callable[[IdentificationSettings], Any]) -> list[str]:
     """Warnings where the steering parameters of ``ident`` move beyond :data:`THRESHOLD` combined stds when
     fitted on the stick-slip rows: ``refit(settings)`` is the same fit with other settings (undetermined
-    parameters reported, not refused; an impossible value refuses it: then nothing is said). Empty when :func:`row_check_applies` is false."""
+    parameters reported, not refused; an impossible value refuses it: then nothing is said). Empty when
+    :func:`row_check_applies` is false."""
     settings = ident.settings
     if not row_check_applies(ident, settings):
         return []
