@@ -289,9 +289,7 @@ class RegressionData:
         held = [self.free[i] for i in columns]
         theta_fixed = self.theta_fixed.copy()
         theta_fixed[held] = values
-        for column, target in self.ties:
-            if target in held:
-                theta_fixed[column] = theta_fixed[target]
+        theta_fixed[[c for c, t in self.ties if t in held]] = theta_fixed[[t for _, t in self.ties if t in held]]
         shift = self.A[:, list(columns)] @ np.asarray(values, dtype=float)
         pseudo = tuple(np.column_stack([P[:, keep], P[:, -1] - P[:, list(columns)] @ values]) for P in self.key_pseudo)
         return dataclasses.replace(self, A=self.A[:, keep], y=self.y - shift, free=tuple(self.free[i] for i in keep),

@@ -114,13 +114,7 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
     SignConventionError
         The encoders contradict the rolling constraints unless a sign is changed (named).
     """
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise ValueError(f"workers={workers!r}: expected an integer >= 1 (threads reading and reducing logs)")
-    items = _items(logs)
-    if platform is not None and not isinstance(platform, Geometry):
-        raise ValueError(f"platform={platform!r}: expected a Geometry (read a platform file with read_platform)")
-    if rows is not None and (len(rows) != len(items) or any(isinstance(x, LogFile) for x in items)):
-        raise ValueError(f"rows: expected the row passes of the {len(items)} logs in memory, got {len(rows)}")
+    items = _checked_arguments(_items(logs), platform, workers, rows)
     model = resolved_model(model)
     keep_freed_memory()
     geometry = platform if platform is not None else platform_for(items)
@@ -131,11 +125,28 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
         ident = _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers, model)[0]
     except (UnidentifiableError, ImplausibleError) as exc:
         raise _diagnosis(exc, items, geometry, fixed, settings, estimator, model) from None
-    if not check_rows:
-        return ident
-    return with_row_check(ident, lambda other: identify(items, geometry, fixed=fixed, settings=other,
-                                                         estimator=estimator, experiment=experiment,
-                                                         keep_blocks=False, workers=workers, model=model))
+    return _row_checked(ident, items, geometry, fixed, estimator, experiment, workers, model) if check_rows else ident
+
+
+def _row_checked(ident: Identification, items: list[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],
+                 estimator: Estimator | None, experiment: str, workers: int, model: ModelSpec) -> Identification:
+    """``ident`` with the row check's warnings (:func:`.row_check.with_row_check`): the same logs refitted."""
+    def refit(other: IdentificationSettings) -> Identification:
+        return identify(items, geometry, fixed=fixed, settings=other, estimator=estimator, experiment=experiment,
+                        keep_blocks=False, workers=workers, model=model)
+
+    return with_row_check(ident, refit)
+
+
+def _checked_arguments(items: list[LoadedLog], platform: Any, workers: Any, rows: Any) -> list[LoadedLog]:
+    """``items``, after checking :func:`identify`'s other arguments (ValueError naming the bad one)."""
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers={workers!r}: expected an integer >= 1 (threads reading and reducing logs)")
+    if platform is not None and not isinstance(platform, Geometry):
+        raise ValueError(f"platform={platform!r}: expected a Geometry (read a platform file with read_platform)")
+    if rows is not None and (len(rows) != len(items) or any(isinstance(x, LogFile) for x in items)):
+        raise ValueError(f"rows: expected the row passes of the {len(items)} logs in memory, got {len(rows)}")
+    return items
 
 
 def _items(logs: Any) -> list[LoadedLog]:
