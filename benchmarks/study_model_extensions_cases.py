@@ -147,6 +147,7 @@ def checks(rec: dict[str, Any], ref: dict[str, Any] | None = None) -> dict[str, 
         out["x_c std inf"] = extra["x_c"]["std"] is None
     if case.breakaway is not None:
         out["d_sw within 10 %"] = abs(extra["d_sw"]["value"] / extra["d_sw"]["true"] - 1) <= D_S_TOL
+        out["d_sw held (std inf)"] = extra["d_sw"]["std"] is None
         out["d_sl, d_sr within 10 %"] = all(abs(extra[n]["value"] / extra[n]["true"] - 1) <= D_S_TOL
                                             for n in ("d_sl", "d_sr"))
         out["d_sl, d_sr std inf (no support)"] = all(extra[n]["std"] is None for n in ("d_sl", "d_sr"))

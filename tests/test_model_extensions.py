@@ -345,6 +345,24 @@ def test_steering_levels_held_with_their_unexcited_coulomb_columns(paper_log):
     assert ident.extra["d_sl"] == ident.parameters.d_cl == 0.0 and ident.extra_std["d_sl"] == math.inf
 
 
+def test_a_level_at_an_undetermined_stribeck_velocity_is_held():
+    """Effect-free model data, w_s searched: the wheels' profile does not rise (no breakaway to see), so the
+    level fitted at the w_sw found is no static level; it is held with why (never a finite std at an
+    undetermined w_s); the steering groups are held for want of rows, said once each, as before. With
+    unexcited="report" the level is not held but reported with an unbounded interval."""
+    log = noisy(model_frame(None)[0])
+    ident = identify_model(log, PROTOTYPE, model=ModelSpec(friction="stribeck"), keep_blocks=False, settings=SLOW_ROWS)
+    assert ident.model.held == ("d_sw",) and ident.extra["d_sw"] == ident.parameters.d_cw
+    assert all(ident.extra_std[n] == math.inf for n in ("d_sl", "d_sr", "d_sw", "w_sw"))
+    assert sum(w.startswith("d_sw not determined by these data") and "Stribeck velocity w_sw" in w
+               for w in ident.warnings) == 1
+    assert [sum(w.startswith(n) for w in ident.warnings) for n in ("d_sl", "d_sr", "d_sw")] == [1, 1, 1]
+    reported = identify_model(log, PROTOTYPE, model=ModelSpec(friction="stribeck"), keep_blocks=False,
+                              settings=SLOW_ROWS.replace(unexcited="report"))  # not held: reported unbounded
+    assert reported.model.held == () and reported.extra_std["d_sw"] == math.inf
+    assert any(w.startswith("d_sw not determined by these data (interval unbounded)") for w in reported.warnings)
+
+
 def test_only_the_breakaway_levels_of_a_refusal_are_held():
     refusal = UnidentifiableError([Dependency("d_sl", (), math.nan, relative_std=1.12),
                                    Dependency("C_l", (), math.nan, relative_std=0.7)])

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from agvdyn.identification.model_fit import held_reason
+from agvdyn.identification.model_fit import held_reason, unsupported_breakaway
 from agvdyn.identification.plausibility import ImplausibleError
 from agvdyn.identification.profile import Profile, profile_interval, profile_minimum, profile_std
 from agvdyn.identification.regression import UnidentifiableError
@@ -269,9 +269,11 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
     """:func:`identify_model` with what it made (:class:`ModelFit`); ``start``: see :func:`search_model`.
 
     A breakaway level the fit refuses (too uncertain, its searched Stribeck velocity's uncertainty
-    included, or impossible) is held at the paper's law (``ModelSpec.held``) and the model fitted
-    again, the refusal's reason a warning: the data do not show that group's breakaway, the other
-    parameters still stand. A refusal of any other parameter is raised."""
+    included, or impossible), or whose searched Stribeck velocity has an unbounded interval
+    (:func:`unbounded_levels`; with ``unexcited="report"`` that level is reported with std inf instead),
+    is held at the paper's law (``ModelSpec.held``) and the model fitted again, the reason a warning:
+    the data do not show that group's breakaway, the other parameters still stand. A refusal of any
+    other parameter is raised."""
     reasons: dict[str, str] = {}
     while True:
         try:
@@ -285,6 +287,12 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
             model = model.replace(held=model.held + tuple(refused))
             reasons.update(refused)
             continue
+        loose = unbounded_levels(fit, model)
+        if loose and not settings.fit.reports_unexcited:  # a level at a w_s the data do not fix: held too
+            model = model.replace(held=model.held + tuple(loose))
+            reasons.update(loose)
+            continue
+        fit = with_unbounded(fit, loose)  # reported: its interval unbounded
         if not reasons:
             return fit
         said = tuple(f"{n} not determined by these data, held at the paper's law d_s = d_c (interval unbounded): "
@@ -293,6 +301,31 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
         warnings = said + tuple(w for w in fit.identification.warnings if w not in generic)
         return dataclasses.replace(fit, identification=dataclasses.replace(fit.identification, warnings=warnings),
                                    warnings=said + fit.warnings)
+
+
+def unbounded_levels(fit: ModelFit, model: ModelSpec) -> dict[str, str]:
+    """The breakaway levels (not yet held) whose searched Stribeck velocity has an unbounded interval (on a
+    bound of its range, or a profile that does not rise), with why: the level is fitted at that velocity
+    only, and moves without limit beyond the range (its std would not say so)."""
+    ident = fit.identification
+    values = dict(zip(STRIBECK_NAMES, ident.model.stribeck_velocities or ()))
+    unsupported = unsupported_breakaway(ident.model, ident.rows.stribeck_support)  # held already, said why
+    return {f"d_s{w[-1]}": (f"its Stribeck velocity {w} = {values.get(w, math.nan):.3g} rad/s is not determined "
+                            f"(std unbounded: on a bound of the search range {model.stribeck_range}, or the profile "
+                            "does not rise), so neither is the level")
+            for w in model.free_stribeck_names
+            if not math.isfinite(fit.stds.get(w, 0.0)) and f"d_s{w[-1]}" not in unsupported}
+
+
+def with_unbounded(fit: ModelFit, levels: Mapping[str, str]) -> ModelFit:
+    """``fit`` with the breakaway ``levels`` (name: why) reported undetermined: std inf and a warning each."""
+    if not levels:
+        return fit
+    ident = fit.identification
+    said = tuple(f"{n} not determined by these data (interval unbounded): {why}" for n, why in levels.items())
+    ident = dataclasses.replace(ident, extra_std={**ident.extra_std, **dict.fromkeys(levels, math.inf)},
+                                warnings=said + ident.warnings)
+    return dataclasses.replace(fit, identification=ident, warnings=said + fit.warnings)
 
 
 def refused_levels(exc: Exception, model: ModelSpec) -> dict[str, str]:
