@@ -295,8 +295,7 @@ def model_identification(logs: Any, platform: Any = None, *, model: ModelSpec, f
         fit = with_unbounded(fit, loose)  # reported: its interval unbounded
         if not reasons:
             return fit
-        said = tuple(f"{n} not determined by these data, held at the paper's law d_s = d_c (interval unbounded): "
-                     f"{why}" for n, why in reasons.items())
+        said = tuple(_undetermined(n, why, held=True) for n, why in reasons.items())
         generic = {held_reason(n) for n in reasons}  # said with the refusal's reason instead
         warnings = said + tuple(w for w in fit.identification.warnings if w not in generic)
         return dataclasses.replace(fit, identification=dataclasses.replace(fit.identification, warnings=warnings),
@@ -322,10 +321,16 @@ def with_unbounded(fit: ModelFit, levels: Mapping[str, str]) -> ModelFit:
     if not levels:
         return fit
     ident = fit.identification
-    said = tuple(f"{n} not determined by these data (interval unbounded): {why}" for n, why in levels.items())
+    said = tuple(_undetermined(n, why, held=False) for n, why in levels.items())
     ident = dataclasses.replace(ident, extra_std={**ident.extra_std, **dict.fromkeys(levels, math.inf)},
                                 warnings=said + ident.warnings)
     return dataclasses.replace(fit, identification=ident, warnings=said + fit.warnings)
+
+
+def _undetermined(name: str, why: str, held: bool) -> str:
+    """The warning of a breakaway level the data do not determine (``held``: at the paper's law)."""
+    where = ", held at the paper's law d_s = d_c" if held else ""
+    return f"{name} not determined by these data{where} (interval unbounded): {why}"
 
 
 def refused_levels(exc: Exception, model: ModelSpec) -> dict[str, str]:
