@@ -131,11 +131,11 @@ def test_the_row_check_warns_where_breakaway_biases_the_default_rows(breakaway_l
     from typer.testing import CliRunner
 
     from agvdyn.cli import app
-    from agvdyn.identification.row_check import THRESHOLD, row_check_applies
+    from agvdyn.identification.row_check import row_check_applies
 
     plain = identify(breakaway_log, PROTOTYPE, keep_blocks=False)
     warned = identify(breakaway_log, PROTOTYPE, keep_blocks=False, check_rows=True)
-    assert warned.parameters == plain.parameters and THRESHOLD == 2.5
+    assert warned.parameters == plain.parameters
     [said] = [w for w in warned.warnings if w.startswith("the steering parameters depend on the rows")]
     assert "d_vr " in said and "--filtering matched --steering-guard 12" in said
     quiet = identify(effect_free_log, PROTOTYPE, keep_blocks=False, check_rows=True)

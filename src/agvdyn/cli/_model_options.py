@@ -115,10 +115,9 @@ def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, ch
              auto: bool, compare: bool, validation):
     """``(identification, selection)``: the comparison (``auto`` or ``compare``; None otherwise) and
     the fit of ``spec`` (``auto``: the comparison's choice); ``check_rows``: the fit's model (resolved)
-    refitted on the stick-slip rows (:func:`agvdyn.identification.row_check.with_row_check`)."""
-    from agvdyn.identification import identify
+    refitted on the stick-slip rows (:func:`agvdyn.identification.pipeline.row_checked`)."""
     from agvdyn.identification.model_search import identify_model
-    from agvdyn.identification.row_check import with_row_check
+    from agvdyn.identification.pipeline import row_checked
     from agvdyn.identification.selection import compare_models
 
     selection = None
@@ -129,9 +128,7 @@ def modelled(logs: list, geometry, fixed, settings, experiment: str, workers, ch
     ident = selection.identification if auto else identify_model(logs, geometry, model=spec, keep_blocks=False,
                                                                  **options)
     if check_rows:
-        ident = with_row_check(ident, lambda other: identify(logs, geometry, fixed=fixed, settings=other,
-                                                             experiment=experiment, keep_blocks=False,
-                                                             workers=workers, model=ident.model))
+        ident = row_checked(ident, logs, geometry, fixed, None, experiment, workers, ident.model)
     return ident, selection
 
 

@@ -143,9 +143,11 @@ def unsupported_breakaway(model: ModelSpec, support: Mapping[str, int]) -> dict[
     if not model.stribeck:
         return {}
     out = {n: held_reason(n) for n in model.held}
-    for g, w_s in zip("lrw", model.stribeck_velocities or (math.nan,) * 3):
-        n = int(support.get(g, 0)) if support else -1
-        if 0 <= n < MIN_SUPPORT_ROWS and f"d_s{g}" not in out:
+    if not support:
+        return out
+    for g, w_s in zip("lrw", model.stribeck_velocities):
+        n = int(support.get(g, 0))
+        if n < MIN_SUPPORT_ROWS and f"d_s{g}" not in out:
             out[f"d_s{g}"] = (f"d_s{g} not determined: {n} used rows of the {_GROUP_NAMES[g]} run in its Stribeck range "
                               f"(|rate| < {0.83 * w_s:.3g} rad/s, needs {MIN_SUPPORT_ROWS}); its column holds only the "
                               "filter's tails of stick phases. Held at the paper's law d_s = d_c (its column joins "

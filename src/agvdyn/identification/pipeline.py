@@ -40,7 +40,7 @@ from agvdyn.io import Log, LogFile, load_logs, sidecar_platform
 from agvdyn.model_spec import PAPER_MODEL, ModelSpec
 from agvdyn.platform import PROTOTYPE, Geometry, read_platform
 
-__all__ = ["identify", "fit_blocks", "load_logs", "platform_for", "row_passes"]
+__all__ = ["identify", "fit_blocks", "load_logs", "platform_for", "row_passes", "row_checked"]
 
 #: What :func:`identify` takes: logs in memory, or files read when used.
 LoadedLog = Union[Log, LogFile]
@@ -125,12 +125,13 @@ def identify(logs: LoadedLog | Sequence[LoadedLog], platform: Geometry | None = 
         ident = _fit_stream(jobs, geometry, fixed, settings, estimator, keep_blocks, workers, model)[0]
     except (UnidentifiableError, ImplausibleError) as exc:
         raise _diagnosis(exc, items, geometry, fixed, settings, estimator, model) from None
-    return _row_checked(ident, items, geometry, fixed, estimator, experiment, workers, model) if check_rows else ident
+    return row_checked(ident, items, geometry, fixed, estimator, experiment, workers, model) if check_rows else ident
 
 
-def _row_checked(ident: Identification, items: list[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],
-                 estimator: Estimator | None, experiment: str, workers: int, model: ModelSpec) -> Identification:
-    """``ident`` with the row check's warnings (:func:`.row_check.with_row_check`): the same logs refitted."""
+def row_checked(ident: Identification, items: Sequence[LoadedLog], geometry: Geometry, fixed: Mapping[str, float],
+                estimator: Estimator | None, experiment: str, workers: int | None, model: ModelSpec) -> Identification:
+    """``ident`` (a fit of ``items`` with ``model``, resolved) with the row check's warnings
+    (:func:`.row_check.with_row_check`): the same logs refitted on the stick-slip rows."""
     def refit(other: IdentificationSettings) -> Identification:
         return identify(items, geometry, fixed=fixed, settings=other, estimator=estimator, experiment=experiment,
                         keep_blocks=False, workers=workers, model=model)
